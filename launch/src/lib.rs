@@ -1,0 +1,1 @@
+//! The mole launcher: launch files, supervision, swapping, measuring

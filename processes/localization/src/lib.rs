@@ -1,0 +1,1 @@
+//! Localization: histogram Bayes filter, KF, EKF, PF (seed §6)

@@ -1,0 +1,1 @@
+//! Monitor: metrics against ground truth, summary.json and map.png

@@ -1,0 +1,1 @@
+//! Planning: APF, DWA, random walk, bounce-back, frontier selection (seed §1, §3-§5)

@@ -1,0 +1,1 @@
+//! Sensing: lidar ray casting, tactile forces, odometry, beacons, position fix

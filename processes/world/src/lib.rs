@@ -1,0 +1,1 @@
+//! World simulation: scenarios, unicycle dynamics, contact resolution, ground truth

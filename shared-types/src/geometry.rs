@@ -1,0 +1,115 @@
+//! Plain geometry shared by the process libraries and embedded in messages.
+//!
+//! The world frame: x to the right, y up, metres; the arena spans `[0, width] × [0, height]`.
+//! Headings are radians, counter-clockwise from +x, wrapped to `(-π, π]`.
+
+use bytemuck::{Pod, Zeroable};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// A planar pose: position (m) and heading θ (rad).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose2 {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+impl Pose2 {
+    pub const fn new(x: f64, y: f64, theta: f64) -> Self {
+        Self { x, y, theta }
+    }
+}
+
+/// An axis-aligned square obstacle of side `side` centred at `(cx, cy)` (seed §1.3).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Square.v1")]
+pub struct Square {
+    pub cx: f64,
+    pub cy: f64,
+    pub side: f64,
+}
+
+impl Square {
+    pub const fn new(cx: f64, cy: f64, side: f64) -> Self {
+        Self { cx, cy, side }
+    }
+    /// Lower-left corner.
+    pub fn min(&self) -> (f64, f64) {
+        (self.cx - self.side / 2.0, self.cy - self.side / 2.0)
+    }
+    /// Upper-right corner.
+    pub fn max(&self) -> (f64, f64) {
+        (self.cx + self.side / 2.0, self.cy + self.side / 2.0)
+    }
+    /// Whether the point lies inside or on the square.
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        let h = self.side / 2.0;
+        (x - self.cx).abs() <= h && (y - self.cy).abs() <= h
+    }
+}
+
+/// A beacon at a known position, seen by range and bearing.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.BeaconSite.v1")]
+pub struct BeaconSite {
+    pub x: f64,
+    pub y: f64,
+    pub id: u32,
+    pub _pad: u32,
+}
+
+/// One contact between the robot's rim and the world, in the world frame.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Contact.v1")]
+pub struct Contact {
+    /// Contact point on the robot's rim (m).
+    pub px: f64,
+    pub py: f64,
+    /// Unit normal pointing from the obstacle into the robot.
+    pub nx: f64,
+    pub ny: f64,
+    /// How far the motion of this step pushed the rim into the obstacle before it was resolved (m).
+    pub depth: f64,
+}
+
+/// Wraps an angle to `(-π, π]`.
+#[inline]
+pub fn wrap_angle(a: f64) -> f64 {
+    use core::f64::consts::{PI, TAU};
+    let mut r = a.rem_euclid(TAU);
+    if r > PI {
+        r -= TAU;
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::f64::consts::PI;
+
+    #[test]
+    fn wrap_angle_stays_in_half_open_interval() {
+        for k in -20..=20 {
+            let a = k as f64 * 0.7;
+            let w = wrap_angle(a);
+            assert!(w > -PI && w <= PI, "{a} -> {w}");
+            assert!(((a - w) / (2.0 * PI)).fract().abs() < 1e-9 || ((a - w) / (2.0 * PI)).fract().abs() > 1.0 - 1e-9);
+        }
+        assert_eq!(wrap_angle(PI), PI);
+        assert_eq!(wrap_angle(-PI), PI);
+    }
+
+    #[test]
+    fn square_corners_and_containment() {
+        let s = Square::new(2.0, 3.0, 1.0);
+        assert_eq!(s.min(), (1.5, 2.5));
+        assert_eq!(s.max(), (2.5, 3.5));
+        assert!(s.contains(2.5, 3.5));
+        assert!(!s.contains(2.6, 3.0));
+    }
+}

@@ -1,0 +1,103 @@
+//! Every message mole's processes exchange, with its topic, its validation and its layout.
+//!
+//! The rules (DESIGN.md, "Messages"): `#[repr(C)]`, an explicit versioned `type_name`, only
+//! fixed-size integers, floats and arrays of them, explicit `_pad` fields, sizes and offsets
+//! asserted at compile time. Every bit pattern is a valid value (`bytemuck::Pod`), so a buggy or
+//! hostile publisher cannot cause undefined behaviour; `validate()` then says whether the values
+//! make sense, and a process drops (and counts) whatever does not.
+
+pub mod geometry;
+pub mod layout;
+pub mod messages;
+pub mod topics;
+
+pub use geometry::*;
+pub use messages::*;
+pub use topics::Topic;
+
+/// Why a received message was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Invalid {
+    /// A float field is NaN or infinite.
+    NotFinite(&'static str),
+    /// A count field is above the array's capacity.
+    CountAboveCapacity(&'static str),
+    /// A mode, kind or flag field holds a code this version does not know.
+    UnknownCode(&'static str),
+    /// A value is outside its physical range (a negative range, a zero resolution...).
+    OutOfRange(&'static str),
+}
+
+impl core::fmt::Display for Invalid {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Invalid::NotFinite(field) => write!(f, "field `{field}` is not finite"),
+            Invalid::CountAboveCapacity(field) => write!(f, "count `{field}` exceeds capacity"),
+            Invalid::UnknownCode(field) => write!(f, "field `{field}` holds an unknown code"),
+            Invalid::OutOfRange(field) => write!(f, "field `{field}` is out of range"),
+        }
+    }
+}
+
+impl std::error::Error for Invalid {}
+
+/// What every message type offers the runtime.
+///
+/// # Safety contract (checked by the bounds)
+/// `Pod` guarantees every bit pattern is a valid value; `ZeroCopySend` with `#[repr(C)]` lets
+/// iceoryx2 place the type in shared memory.
+pub trait Message:
+    bytemuck::Pod + iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend + core::fmt::Debug
+{
+    /// The versioned name every language must agree on, e.g. `mole.Scan.v1`.
+    const TYPE_NAME: &'static str;
+    /// The common header.
+    fn header(&self) -> &Header;
+    /// The common header, to stamp before publishing.
+    fn header_mut(&mut self) -> &mut Header;
+    /// Whether the values make sense; a message that fails is dropped and counted.
+    fn validate(&self) -> Result<(), Invalid>;
+}
+
+/// Checks that a float is finite, naming the field otherwise.
+#[inline]
+pub fn finite(field: &'static str, value: f64) -> Result<(), Invalid> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(Invalid::NotFinite(field))
+    }
+}
+
+/// Checks that every float in a slice is finite.
+#[inline]
+pub fn all_finite<T: Copy + Into<f64>>(field: &'static str, values: &[T]) -> Result<(), Invalid> {
+    if values.iter().all(|v| (*v).into().is_finite()) {
+        Ok(())
+    } else {
+        Err(Invalid::NotFinite(field))
+    }
+}
+
+/// Checks that a count fits its array.
+#[inline]
+pub fn within(field: &'static str, count: u32, capacity: usize) -> Result<(), Invalid> {
+    if (count as usize) <= capacity {
+        Ok(())
+    } else {
+        Err(Invalid::CountAboveCapacity(field))
+    }
+}
+
+/// Writes `name` into a fixed, NUL-padded byte field (truncating at the capacity).
+pub fn write_name(field: &mut [u8], name: &str) {
+    field.fill(0);
+    let n = name.len().min(field.len());
+    field[..n].copy_from_slice(&name.as_bytes()[..n]);
+}
+
+/// Reads a fixed, NUL-padded byte field back as text (lossy on invalid UTF-8).
+pub fn read_name(field: &[u8]) -> std::borrow::Cow<'_, str> {
+    let end = field.iter().position(|b| *b == 0).unwrap_or(field.len());
+    String::from_utf8_lossy(&field[..end])
+}
