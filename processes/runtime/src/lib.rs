@@ -1,1 +1,26 @@
-pub fn _x(){}
+//! The one place in mole that touches iceoryx2.
+//!
+//! A process main reads as a sentence: [`Context`] (node bound to a namespace) → typed
+//! [`Publisher`] / [`Subscriber`] from a topic constant → [`WaitSet`] that sleeps until data, a
+//! deadline or a shutdown → [`StepGate`] that decides, per clock mode, whether a step is due.
+//!
+//! - Every publish also signals the topic's event service, so subscribers sleep in a WaitSet:
+//!   no busy loops, no sleep-polling.
+//! - iceoryx2's own signal handling is disabled on nodes and WaitSets; SIGINT/SIGTERM go to a
+//!   `ctrlc` handler that sets the shutdown flag (iceoryx2 would silently replace it otherwise).
+//! - Dead nodes' stale resources are cleaned when a process starts.
+//! - Per-topic statistics (rate, dropped, invalid, latency from `origin_ns`) are published on
+//!   `stack/stats` once a second.
+
+mod clock;
+mod node;
+mod ports;
+mod stats;
+
+pub use clock::{ClockMode, StepGate};
+pub use node::{
+    Attachment, CommonArgs, Context, RuntimeError, WaitSet, Wake, cleanup_dead_nodes, init_tracing,
+    live_nodes_in_namespace, now_ns,
+};
+pub use ports::{Publisher, Subscriber, Waker};
+pub use stats::StatsRegistry;

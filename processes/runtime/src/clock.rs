@@ -1,0 +1,116 @@
+//! The two clock modes and the rule that decides when a process handles a step.
+
+use core::fmt;
+use core::str::FromStr;
+
+/// How the stack keeps time (DESIGN.md, "Clock modes").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ClockMode {
+    /// The world steps at a fixed rate; every process reacts to its newest input.
+    #[default]
+    Realtime,
+    /// The world steps k only after the command for k−1 arrived; every process handles step k
+    /// once all its inputs for k are in. Deterministic, as fast as the machine goes.
+    Lockstep,
+}
+
+impl ClockMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ClockMode::Realtime => "realtime",
+            ClockMode::Lockstep => "lockstep",
+        }
+    }
+}
+
+impl fmt::Display for ClockMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for ClockMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "realtime" => Ok(ClockMode::Realtime),
+            "lockstep" => Ok(ClockMode::Lockstep),
+            other => Err(format!(
+                "unknown clock mode `{other}`, expected realtime or lockstep"
+            )),
+        }
+    }
+}
+
+/// Decides whether a step is due from the ticks of a process's inputs.
+///
+/// The first input is the trigger. Realtime: a step is due whenever the trigger carries a tick
+/// not handled yet; the other inputs are used as they are (newest). Lockstep: a step is due when
+/// every input carries the same tick k and k was not handled yet.
+#[derive(Debug, Clone)]
+pub struct StepGate {
+    mode: ClockMode,
+    last: Option<u64>,
+}
+
+impl StepGate {
+    pub fn new(mode: ClockMode) -> Self {
+        Self { mode, last: None }
+    }
+
+    /// The tick to handle now, if any; marks it handled.
+    #[must_use]
+    pub fn ready(&mut self, ticks: &[Option<u64>]) -> Option<u64> {
+        let k = (*ticks.first()?)?;
+        if self.last.is_some_and(|last| k <= last) {
+            return None;
+        }
+        if self.mode == ClockMode::Lockstep && ticks.iter().any(|t| *t != Some(k)) {
+            return None;
+        }
+        self.last = Some(k);
+        Some(k)
+    }
+
+    /// The last tick handled.
+    pub fn last(&self) -> Option<u64> {
+        self.last
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lockstep_waits_for_every_input_of_the_same_tick() {
+        let mut gate = StepGate::new(ClockMode::Lockstep);
+        assert_eq!(gate.ready(&[Some(0), None]), None);
+        assert_eq!(gate.ready(&[Some(0), Some(1)]), None);
+        assert_eq!(gate.ready(&[Some(0), Some(0)]), Some(0));
+        assert_eq!(
+            gate.ready(&[Some(0), Some(0)]),
+            None,
+            "a tick is handled once"
+        );
+        assert_eq!(gate.ready(&[Some(1), Some(0)]), None);
+        assert_eq!(gate.ready(&[Some(1), Some(1)]), Some(1));
+    }
+
+    #[test]
+    fn realtime_steps_on_every_new_trigger() {
+        let mut gate = StepGate::new(ClockMode::Realtime);
+        assert_eq!(gate.ready(&[None, Some(3)]), None);
+        assert_eq!(gate.ready(&[Some(5), None]), Some(5));
+        assert_eq!(gate.ready(&[Some(5), Some(9)]), None);
+        assert_eq!(gate.ready(&[Some(7), Some(2)]), Some(7));
+        assert_eq!(gate.last(), Some(7));
+    }
+
+    #[test]
+    fn modes_parse_and_print() {
+        assert_eq!("lockstep".parse::<ClockMode>(), Ok(ClockMode::Lockstep));
+        assert_eq!(ClockMode::Realtime.to_string(), "realtime");
+        assert!("fast".parse::<ClockMode>().is_err());
+    }
+}

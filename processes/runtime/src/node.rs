@@ -1,0 +1,456 @@
+//! The process's node, its ports' factory, its wake-ups and its shutdown.
+
+use crate::clock::ClockMode;
+use crate::ports::{Publisher, Subscriber, Waker};
+use crate::stats::StatsRegistry;
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use mole_types::{Message, Stats, Topic, topics};
+use std::rc::Rc;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// How often a process publishes its statistics.
+const STATS_PERIOD: Duration = Duration::from_secs(1);
+
+/// What can go wrong in the runtime. Every variant carries a sentence a user can act on.
+#[derive(Debug, thiserror::Error)]
+pub enum RuntimeError {
+    #[error("invalid name `{0}`: {1}")]
+    Name(String, String),
+    #[error("cannot create the node `{0}`: {1}")]
+    Node(String, String),
+    #[error("cannot open topic `{topic}`: {reason}")]
+    Service { topic: String, reason: String },
+    #[error("{0}")]
+    Port(String),
+    #[error("waiting failed: {0}")]
+    Wait(String),
+    #[error("cannot install the Ctrl-C handler: {0}")]
+    Signal(String),
+}
+
+/// The arguments every process takes, from its command line or the environment the launcher
+/// sets (`MOLE_NAMESPACE`, `MOLE_MODE`, `MOLE_RATE_HZ`, `MOLE_SEED`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct CommonArgs {
+    /// Namespace of the stack: services are `mole/<namespace>/<topic>`.
+    #[arg(long, env = "MOLE_NAMESPACE", default_value = "robot0")]
+    pub namespace: String,
+    /// Clock mode: realtime or lockstep.
+    #[arg(long, env = "MOLE_MODE", default_value = "realtime")]
+    pub mode: ClockMode,
+    /// World step rate in realtime mode (Hz).
+    #[arg(long, env = "MOLE_RATE_HZ", default_value_t = 100.0)]
+    pub rate_hz: f64,
+    /// Seed override (the scenario's seed otherwise).
+    #[arg(long, env = "MOLE_SEED")]
+    pub seed: Option<u64>,
+}
+
+/// CLOCK_MONOTONIC in nanoseconds: the clock of every `stamp_ns` and `origin_ns`.
+pub fn now_ns() -> u64 {
+    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {
+        Ok(ts) => (ts.tv_sec() as u64).saturating_mul(1_000_000_000) + ts.tv_nsec() as u64,
+        Err(_) => 0,
+    }
+}
+
+/// Logs to stderr through `tracing`, filtered by RUST_LOG (default `info`).
+pub fn init_tracing(role: &str) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+    tracing::debug!(role, "tracing initialised");
+}
+
+/// Removes the resources of every dead node (a crashed earlier run, a killed process), so they
+/// never block a new one. Returns how many nodes were cleaned.
+pub fn cleanup_dead_nodes() -> usize {
+    let mut cleaned = 0;
+    let result = Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state {
+            let name = view.details().as_ref().map(|d| d.name().to_string());
+            match view.try_remove_stale_resources() {
+                Ok(()) => {
+                    cleaned += 1;
+                    tracing::info!(node = ?name, "cleaned the resources of a dead node");
+                }
+                Err(e) => tracing::warn!(node = ?name, "cannot clean a dead node: {e:?}"),
+            }
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = result {
+        tracing::warn!("cannot list nodes: {e:?}");
+    }
+    cleaned
+}
+
+/// Names of the live nodes of a namespace (`mole/<ns>/<role>`), e.g. to refuse a second stack.
+pub fn live_nodes_in_namespace(namespace: &str) -> Vec<String> {
+    let prefix = format!("mole/{namespace}/");
+    let mut names = Vec::new();
+    let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if let NodeState::Alive(view) = state
+            && let Some(details) = view.details()
+        {
+            let name = details.name().to_string();
+            if name.starts_with(&prefix) {
+                names.push(name);
+            }
+        }
+        CallbackProgression::Continue
+    });
+    names
+}
+
+type PubSubFactory<M> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, M, ()>;
+type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+
+/// One process's link to the stack: its node in the namespace, its statistics, its shutdown flag.
+pub struct Context {
+    node: Node<ipc::Service>,
+    namespace: String,
+    role: String,
+    mode: ClockMode,
+    rate_hz: f64,
+    seed: Option<u64>,
+    shutdown: Arc<AtomicBool>,
+    stats: StatsRegistry,
+    stats_publisher: Option<Publisher<Stats>>,
+    last_stats: Instant,
+    steps: u64,
+}
+
+impl Context {
+    /// Initialises tracing and the Ctrl-C/SIGTERM handler, cleans dead nodes, and creates the
+    /// node `mole/<namespace>/<role>` with iceoryx2's own signal handling disabled.
+    pub fn new(role: &str, args: &CommonArgs) -> Result<Context, RuntimeError> {
+        init_tracing(role);
+        let shutdown = Arc::new(AtomicBool::new(false));
+        let flag = shutdown.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+            .map_err(|e| RuntimeError::Signal(e.to_string()))?;
+        Self::with_shutdown_flag(role, args, shutdown)
+    }
+
+    /// As [`Context::new`], for a process (the launcher) that owns its signal handling.
+    pub fn with_shutdown_flag(
+        role: &str,
+        args: &CommonArgs,
+        shutdown: Arc<AtomicBool>,
+    ) -> Result<Context, RuntimeError> {
+        cleanup_dead_nodes();
+        let node_name = format!("mole/{}/{role}", args.namespace);
+        let name: NodeName = node_name
+            .as_str()
+            .try_into()
+            .map_err(|e| RuntimeError::Name(node_name.clone(), format!("{e:?}")))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| RuntimeError::Node(node_name.clone(), format!("{e:?}")))?;
+        let mut ctx = Context {
+            node,
+            namespace: args.namespace.clone(),
+            role: role.to_string(),
+            mode: args.mode,
+            rate_hz: args.rate_hz,
+            seed: args.seed,
+            shutdown,
+            stats: StatsRegistry::default(),
+            stats_publisher: None,
+            last_stats: Instant::now(),
+            steps: 0,
+        };
+        ctx.stats_publisher = Some(ctx.publisher(topics::STACK_STATS)?);
+        Ok(ctx)
+    }
+
+    pub fn namespace(&self) -> &str {
+        &self.namespace
+    }
+    pub fn role(&self) -> &str {
+        &self.role
+    }
+    pub fn mode(&self) -> ClockMode {
+        self.mode
+    }
+    pub fn rate_hz(&self) -> f64 {
+        self.rate_hz
+    }
+    /// The `--seed` override, if any.
+    pub fn seed(&self) -> Option<u64> {
+        self.seed
+    }
+    /// Whether SIGINT or SIGTERM arrived.
+    pub fn shutdown_requested(&self) -> bool {
+        self.shutdown.load(Ordering::SeqCst)
+    }
+    /// Asks the process to stop at its next wake-up.
+    pub fn request_shutdown(&self) {
+        self.shutdown.store(true, Ordering::SeqCst);
+    }
+    /// Counts a handled step (reported in the statistics).
+    pub fn count_step(&mut self) {
+        self.steps += 1;
+    }
+
+    fn service_name(&self, topic: &str) -> Result<ServiceName, RuntimeError> {
+        let full = topics::service_name(&self.namespace, topic);
+        full.as_str()
+            .try_into()
+            .map_err(|e| RuntimeError::Name(full.clone(), format!("{e:?}")))
+    }
+
+    fn open_services<M: Message>(
+        &self,
+        topic: &Topic<M>,
+    ) -> Result<(PubSubFactory<M>, EventFactory), RuntimeError> {
+        let name = self.service_name(topic.name)?;
+        let failed = |reason: String| RuntimeError::Service {
+            topic: topic.name.to_string(),
+            reason,
+        };
+        // Lockstep never drops: a full subscriber queue makes the publisher wait. Realtime
+        // drops the oldest sample, so a slow subscriber never stalls the pipeline.
+        let lockstep = self.mode == ClockMode::Lockstep;
+        let pubsub = self
+            .node
+            .service_builder(&name)
+            .publish_subscribe::<M>()
+            .history_size(topic.history)
+            .subscriber_max_buffer_size(topic.buffer)
+            .subscriber_max_borrowed_samples(2)
+            .max_publishers(topic.max_publishers)
+            .max_subscribers(topic.max_subscribers)
+            .enable_safe_overflow(!lockstep)
+            .open_or_create()
+            .map_err(|e| failed(describe_open_error(&format!("{e:?}"), M::TYPE_NAME)))?;
+        let event = self
+            .node
+            .service_builder(&name)
+            .event()
+            .max_notifiers(topic.max_publishers + 2)
+            .max_listeners(topic.max_subscribers + 2)
+            .open_or_create()
+            .map_err(|e| failed(format!("event service: {e:?}")))?;
+        Ok((pubsub, event))
+    }
+
+    /// A publisher on `topic`, with the event that wakes its subscribers.
+    pub fn publisher<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
+        let (pubsub, event) = self.open_services(&topic)?;
+        let port_failed =
+            |e: String| RuntimeError::Port(format!("publisher on {}: {e}", topic.name));
+        let lockstep = self.mode == ClockMode::Lockstep;
+        let mut builder = pubsub.publisher_builder().max_loaned_samples(2);
+        if lockstep {
+            builder = builder.backpressure_strategy(BackpressureStrategy::RetryUntilDelivered);
+        }
+        let publisher = builder
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let notifier = event
+            .notifier_builder()
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let stats = self
+            .stats
+            .register(topic.name, true)
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        Ok(Publisher {
+            topic: topic.name,
+            publisher,
+            notifier,
+            stats,
+            seq: 0,
+        })
+    }
+
+    /// A subscriber on `topic`, with the listener its WaitSet sleeps on.
+    pub fn subscriber<M: Message>(&self, topic: Topic<M>) -> Result<Subscriber<M>, RuntimeError> {
+        let (pubsub, event) = self.open_services(&topic)?;
+        let port_failed =
+            |e: String| RuntimeError::Port(format!("subscriber on {}: {e}", topic.name));
+        let subscriber = pubsub
+            .subscriber_builder()
+            .buffer_size(topic.buffer)
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let listener = event
+            .listener_builder()
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let stats = self
+            .stats
+            .register(topic.name, false)
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        Ok(Subscriber {
+            topic: topic.name,
+            subscriber,
+            listener: Rc::new(listener),
+            stats,
+            latest: None,
+            last_seq: None,
+            last_warning: None,
+        })
+    }
+
+    /// A WaitSet for this process's wake-ups (signal handling disabled).
+    pub fn waitset(&self) -> Result<WaitSet, RuntimeError> {
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        Ok(WaitSet { waitset })
+    }
+
+    /// Announces that every port exists: publishes the first statistics at once, which is what
+    /// the launcher waits for before starting the processes that depend on this one.
+    pub fn ready(&mut self) {
+        tracing::info!(role = %self.role, namespace = %self.namespace, mode = %self.mode, "ready");
+        self.publish_stats();
+    }
+
+    /// Publishes the statistics when their period is due; returns the time until the next.
+    pub fn tick_stats(&mut self) -> Duration {
+        let elapsed = self.last_stats.elapsed();
+        if elapsed >= STATS_PERIOD {
+            self.publish_stats();
+            STATS_PERIOD
+        } else {
+            STATS_PERIOD - elapsed
+        }
+    }
+
+    fn publish_stats(&mut self) {
+        let window_s = self.last_stats.elapsed().as_secs_f64();
+        self.last_stats = Instant::now();
+        let (cpu_ns, max_rss_bytes) = resource_usage();
+        let steps = self.steps;
+        let role = self.role.clone();
+        let registry = self.stats.clone();
+        if let Some(publisher) = self.stats_publisher.as_mut() {
+            let result = publisher.publish(steps, 0, |stats| {
+                mole_types::write_name(&mut stats.process, &role);
+                stats.pid = std::process::id();
+                stats.cpu_ns = cpu_ns;
+                stats.max_rss_bytes = max_rss_bytes;
+                stats.steps = steps;
+                registry.write_and_reset_window(stats, window_s);
+            });
+            if let Err(e) = result {
+                tracing::debug!("cannot publish statistics: {e}");
+            }
+        }
+    }
+}
+
+/// User + system CPU time (ns) and peak RSS (bytes) of this process.
+fn resource_usage() -> (u64, u64) {
+    use nix::sys::resource::{UsageWho, getrusage};
+    match getrusage(UsageWho::RUSAGE_SELF) {
+        Ok(usage) => {
+            let tv_ns = |tv: nix::sys::time::TimeVal| {
+                (tv.tv_sec() as u64) * 1_000_000_000 + (tv.tv_usec() as u64) * 1000
+            };
+            let cpu = tv_ns(usage.user_time()) + tv_ns(usage.system_time());
+            (cpu, (usage.max_rss() as u64) * 1024)
+        }
+        Err(_) => (0, 0),
+    }
+}
+
+/// Turns iceoryx2's open errors into a sentence; a type mismatch names both sides.
+fn describe_open_error(debug: &str, ours: &str) -> String {
+    if debug.contains("IncompatibleTypes") {
+        format!(
+            "another process uses a different message type on this topic (this process expects `{ours}`)"
+        )
+    } else if debug.contains("VersionMismatch") || debug.contains("IncompatibleVersion") {
+        "the service was created by a process built against another iceoryx2 version".to_string()
+    } else {
+        debug.to_string()
+    }
+}
+
+/// Why a process woke up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// At least one attached subscriber has new data.
+    Data,
+    /// The deadline passed with no data.
+    Timeout,
+    /// SIGINT or SIGTERM arrived: finish up and exit.
+    Shutdown,
+}
+
+/// Sleeps until data on an attached subscriber, a deadline, or a shutdown.
+pub struct WaitSet {
+    waitset: iceoryx2::waitset::WaitSet<ipc::Service>,
+}
+
+/// Keeps a subscriber attached to a [`WaitSet`] while it lives.
+pub struct Attachment<'w, 'a> {
+    _guard: iceoryx2::waitset::WaitSetGuard<'w, 'a, ipc::Service>,
+}
+
+impl WaitSet {
+    /// Wakes this WaitSet whenever the waker's topic is published.
+    pub fn attach<'w, 'a>(&'w self, waker: &'a Waker) -> Result<Attachment<'w, 'a>, RuntimeError> {
+        let guard = self
+            .waitset
+            .attach_notification(&*waker.listener)
+            .map_err(|e| RuntimeError::Wait(format!("attach {}: {e:?}", waker.topic)))?;
+        Ok(Attachment { _guard: guard })
+    }
+
+    /// Sleeps until data, `deadline` (if any) or a shutdown; publishes the statistics on the
+    /// way when they are due.
+    pub fn wait(&self, ctx: &mut Context, deadline: Option<Instant>) -> Result<Wake, RuntimeError> {
+        loop {
+            if ctx.shutdown_requested() {
+                return Ok(Wake::Shutdown);
+            }
+            let until_stats = ctx.tick_stats();
+            let now = Instant::now();
+            let until_deadline = deadline.map(|d| d.saturating_duration_since(now));
+            if until_deadline == Some(Duration::ZERO) {
+                return Ok(Wake::Timeout);
+            }
+            let timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));
+            let mut woke = false;
+            let result = self
+                .waitset
+                .wait_and_process_once_with_timeout(
+                    |_| {
+                        woke = true;
+                        CallbackProgression::Continue
+                    },
+                    timeout,
+                )
+                .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+            match result {
+                WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
+                    if ctx.shutdown_requested() {
+                        return Ok(Wake::Shutdown);
+                    }
+                }
+                WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {}
+            }
+            if woke {
+                return Ok(Wake::Data);
+            }
+        }
+    }
+}

@@ -1,0 +1,201 @@
+//! Typed ports: a publisher writes a loaned sample in place and signals the topic's event; a
+//! subscriber drains its queue, validates every message, and keeps the newest one borrowed.
+
+use crate::node::{RuntimeError, now_ns};
+use crate::stats::PortHandle;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use mole_types::Message;
+use std::rc::Rc;
+use std::time::{Duration, Instant};
+
+/// Minimum spacing of the warnings an invalid message causes (each one is still counted).
+const WARN_EVERY: Duration = Duration::from_secs(5);
+
+/// A typed publisher bound to one topic.
+pub struct Publisher<M: Message> {
+    pub(crate) topic: &'static str,
+    pub(crate) publisher: iceoryx2::port::publisher::Publisher<ipc::Service, M, ()>,
+    pub(crate) notifier: Notifier<ipc::Service>,
+    pub(crate) stats: PortHandle,
+    pub(crate) seq: u64,
+}
+
+impl<M: Message> Publisher<M> {
+    /// Loans a sample in shared memory, lets `fill` write the payload in place, stamps the
+    /// header (`seq`, `tick`, `stamp_ns`, `origin_ns`), sends it and wakes the subscribers.
+    ///
+    /// `fill` sees the previous contents of the slot (stale but valid values: every bit pattern
+    /// of a message is valid); it must write every field it means to send.
+    pub fn publish(
+        &mut self,
+        tick: u64,
+        origin_ns: u64,
+        fill: impl FnOnce(&mut M),
+    ) -> Result<(), RuntimeError> {
+        let sample = match self.publisher.loan_uninit() {
+            Ok(sample) => sample,
+            Err(e) => {
+                self.stats.dropped(1);
+                return Err(RuntimeError::Port(format!("loan on {}: {e:?}", self.topic)));
+            }
+        };
+        // SAFETY: the sample lives in a shared-memory segment that the OS zero-filled when it
+        // was mapped and that only ever holds whole messages afterwards, so every byte is
+        // initialised; `M: Pod` makes any byte pattern a valid `M`.
+        let mut sample = unsafe { sample.assume_init() };
+        let message = sample.payload_mut();
+        fill(message);
+        let header = message.header_mut();
+        header.seq = self.seq;
+        header.tick = tick;
+        header.stamp_ns = now_ns();
+        header.origin_ns = origin_ns;
+        if let Err(e) = sample.send() {
+            self.stats.dropped(1);
+            return Err(RuntimeError::Port(format!("send on {}: {e:?}", self.topic)));
+        }
+        self.seq += 1;
+        self.stats.counted(None);
+        if let Err(e) = self.notifier.notify() {
+            tracing::debug!(topic = self.topic, "notify failed: {e:?}");
+        }
+        Ok(())
+    }
+
+    /// Connects subscribers that appeared since the last send and delivers them the history
+    /// (world/map keeps one sample for late joiners); wakes them if anything was delivered.
+    pub fn update_connections(&self) {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        match self.publisher.update_connections() {
+            Ok(()) => {
+                let _ = self.notifier.notify();
+            }
+            Err(e) => tracing::debug!(topic = self.topic, "update_connections failed: {e:?}"),
+        }
+    }
+
+    /// The topic name (without the namespace).
+    pub fn topic(&self) -> &'static str {
+        self.topic
+    }
+}
+
+/// A typed subscriber bound to one topic.
+pub struct Subscriber<M: Message> {
+    pub(crate) topic: &'static str,
+    pub(crate) subscriber: iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()>,
+    pub(crate) listener: Rc<Listener<ipc::Service>>,
+    pub(crate) stats: PortHandle,
+    pub(crate) latest: Option<Sample<ipc::Service, M, ()>>,
+    pub(crate) last_seq: Option<u64>,
+    pub(crate) last_warning: Option<Instant>,
+}
+
+impl<M: Message> Subscriber<M> {
+    /// Takes every new message in arrival order; invalid ones are dropped and counted. The last
+    /// valid one stays available through [`Subscriber::latest`]. Returns how many were valid.
+    pub fn drain(&mut self, mut on_message: impl FnMut(&M)) -> usize {
+        self.clear_events();
+        let mut valid = 0;
+        while let Some(sample) = self.next_valid() {
+            on_message(sample.payload());
+            self.latest = Some(sample);
+            valid += 1;
+        }
+        valid
+    }
+
+    /// Keeps only the newest valid message; returns whether a new one arrived.
+    pub fn update(&mut self) -> bool {
+        self.clear_events();
+        let mut fresh = false;
+        while let Some(sample) = self.next_valid() {
+            // Release the older sample before keeping the newer one.
+            self.latest = None;
+            self.latest = Some(sample);
+            fresh = true;
+        }
+        fresh
+    }
+
+    /// The newest valid message received so far.
+    pub fn latest(&self) -> Option<&M> {
+        self.latest.as_ref().map(|s| s.payload())
+    }
+
+    /// The tick of the newest valid message.
+    pub fn tick(&self) -> Option<u64> {
+        self.latest().map(|m| m.header().tick)
+    }
+
+    /// The topic name (without the namespace).
+    pub fn topic(&self) -> &'static str {
+        self.topic
+    }
+
+    /// A handle that wakes a [`crate::WaitSet`] when this topic is published; attach it with
+    /// [`crate::WaitSet::attach`] (the subscriber itself stays free to be drained).
+    pub fn waker(&self) -> Waker {
+        Waker {
+            topic: self.topic,
+            listener: self.listener.clone(),
+        }
+    }
+
+    fn clear_events(&self) {
+        if let Err(e) = self.listener.try_wait(|_| {}) {
+            tracing::debug!(topic = self.topic, "listener drain failed: {e:?}");
+        }
+    }
+
+    fn next_valid(&mut self) -> Option<Sample<ipc::Service, M, ()>> {
+        loop {
+            let sample = match self.subscriber.receive() {
+                Ok(Some(sample)) => sample,
+                Ok(None) => return None,
+                Err(e) => {
+                    tracing::debug!(topic = self.topic, "receive failed: {e:?}");
+                    return None;
+                }
+            };
+            let message = sample.payload();
+            if let Err(why) = message.validate() {
+                self.stats.invalid();
+                let now = Instant::now();
+                if self
+                    .last_warning
+                    .is_none_or(|t| now.duration_since(t) >= WARN_EVERY)
+                {
+                    self.last_warning = Some(now);
+                    tracing::warn!(
+                        topic = self.topic,
+                        "dropped an invalid {}: {why}",
+                        M::TYPE_NAME
+                    );
+                }
+                continue;
+            }
+            let header = *message.header();
+            // A sequence gap means the queue overflowed (or a publisher lost samples); a step
+            // backwards means a new publisher (a restart or a swap) and starts over.
+            if let Some(last) = self.last_seq
+                && header.seq > last + 1
+            {
+                self.stats.dropped(header.seq - last - 1);
+            }
+            self.last_seq = Some(header.seq);
+            let latency = (header.origin_ns > 0).then(|| now_ns().saturating_sub(header.origin_ns));
+            self.stats.counted(latency);
+            return Some(sample);
+        }
+    }
+}
+
+/// The wake-up side of a subscriber: the listener of the topic's event service.
+pub struct Waker {
+    pub(crate) topic: &'static str,
+    pub(crate) listener: Rc<Listener<ipc::Service>>,
+}
