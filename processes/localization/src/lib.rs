@@ -1,1 +1,216 @@
-//! Localization: histogram Bayes filter, KF, EKF, PF (seed §6)
+//! Localization: histogram Bayes filter, KF, EKF, PF (seed §6).
+//!
+//! Every estimator implements [`Estimator`]: the process main calls `predict` with the odometry
+//! of a step, then `correct` with that step's beacon readings and position fix, then
+//! `write_pose` into the loaned `localization/pose` sample. The pieces the four estimators share
+//! live beside them: the motion and measurement models ([`models`]), the noise ([`NoiseModel`]),
+//! the generic Kalman correction ([`kalman`]) and the beacon lookup ([`BeaconTable`]).
+//!
+//! Naming follows the seed (after Thrun, *Probabilistic Robotics*): R_t is the PROCESS noise
+//! covariance, Q_t the MEASUREMENT noise covariance.
+
+pub mod ekf;
+pub mod kalman;
+pub mod models;
+pub mod noise;
+
+pub use ekf::Ekf;
+pub use kalman::{KalmanError, kalman_correct};
+pub use models::BeaconTable;
+pub use noise::NoiseModel;
+
+use mole_types::{
+    Beacons, ESTIMATOR_BAYES, ESTIMATOR_EKF, ESTIMATOR_KF, ESTIMATOR_PF, Fix, Odom, Pose, Pose2,
+    WorldMap,
+};
+use thiserror::Error;
+
+/// What every estimator does each step; the process main calls predict, then correct, then
+/// write_pose.
+pub trait Estimator {
+    /// The estimator's id, `mole_types::ESTIMATOR_EKF` etc.
+    fn id(&self) -> u32;
+    /// Prediction step (seed §6.3): moves the belief by the control u_t = (v, ω) over `odom.dt`.
+    fn predict(&mut self, odom: &Odom);
+    /// Correction step (seed §6.3): folds in this step's beacon readings and, when valid, the fix.
+    fn correct(&mut self, beacons: &Beacons, fix: &Fix);
+    /// The mean pose, θ wrapped to (−π, π].
+    fn pose(&self) -> Pose2;
+    /// Σ over (x, y, θ), row-major.
+    fn covariance(&self) -> [f64; 9];
+    /// Fills x, y, theta, covariance, estimator (not header, not update_ns).
+    fn write_pose(&self, out: &mut Pose) {
+        let p = self.pose();
+        out.x = p.x;
+        out.y = p.y;
+        out.theta = p.theta;
+        out.covariance = self.covariance();
+        out.estimator = self.id();
+    }
+    /// Readings refused as outliers by the χ² gate so far.
+    fn rejected(&self) -> u64 {
+        0
+    }
+    /// Inputs ignored so far as unusable: unknown beacon ids, non-finite values, bad flags.
+    fn ignored(&self) -> u64 {
+        0
+    }
+}
+
+/// Why one reading or control was not used. Gated readings count as rejected, the rest as
+/// ignored.
+#[derive(Debug, Clone, Copy, PartialEq, Error)]
+pub enum ReadingError {
+    /// The reading names a beacon the map does not have.
+    #[error("unknown beacon id {0}")]
+    UnknownBeacon(u32),
+    /// A value is NaN or infinite, or out of its range (negative range or dt, unknown flag).
+    #[error("reading is not finite or out of range")]
+    Invalid,
+    /// The predicted beacon range is ~0, where the bearing is undefined.
+    #[error("predicted range to the beacon is too small for a bearing")]
+    TooClose,
+    /// The innovation failed the χ² gate: an outlier.
+    #[error("outlier: squared Mahalanobis distance {mahalanobis2} > gate {gate}")]
+    Gated {
+        /// νᵀ S⁻¹ ν.
+        mahalanobis2: f64,
+        /// The gate.
+        gate: f64,
+    },
+    /// The innovation covariance was not positive definite.
+    #[error("innovation covariance is not positive definite")]
+    Singular,
+}
+
+impl ReadingError {
+    /// Whether this is an outlier refused by the gate (as opposed to an unusable input).
+    pub fn is_rejection(&self) -> bool {
+        matches!(self, ReadingError::Gated { .. })
+    }
+}
+
+impl From<KalmanError> for ReadingError {
+    fn from(e: KalmanError) -> Self {
+        match e {
+            KalmanError::Gated { mahalanobis2, gate } => ReadingError::Gated { mahalanobis2, gate },
+            KalmanError::NotPositiveDefinite => ReadingError::Singular,
+            KalmanError::NotFinite => ReadingError::Invalid,
+        }
+    }
+}
+
+/// Errors of the localization library.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum LocalizationError {
+    /// `--estimator` named no estimator.
+    #[error("unknown estimator `{0}` (expected bayes, kf, ekf or pf)")]
+    UnknownEstimator(String),
+    /// The estimator exists in the design but not yet in this library.
+    #[error("estimator `{0}` is not implemented yet")]
+    NotImplemented(&'static str),
+}
+
+/// The four estimators of seed §6, as `--estimator` names them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EstimatorKind {
+    /// Histogram Bayes filter (seed §6.3).
+    Bayes,
+    /// Linear Kalman filter (seed §6.5).
+    Kf,
+    /// Extended Kalman filter (seed §6.6).
+    Ekf,
+    /// Particle filter (seed §6.7).
+    Pf,
+}
+
+impl EstimatorKind {
+    /// The `localization/pose` estimator id.
+    pub fn id(self) -> u32 {
+        match self {
+            EstimatorKind::Bayes => ESTIMATOR_BAYES,
+            EstimatorKind::Kf => ESTIMATOR_KF,
+            EstimatorKind::Ekf => ESTIMATOR_EKF,
+            EstimatorKind::Pf => ESTIMATOR_PF,
+        }
+    }
+
+    /// The `--estimator` name.
+    pub fn name(self) -> &'static str {
+        match self {
+            EstimatorKind::Bayes => "bayes",
+            EstimatorKind::Kf => "kf",
+            EstimatorKind::Ekf => "ekf",
+            EstimatorKind::Pf => "pf",
+        }
+    }
+
+    /// Builds this estimator for the world in `map` (start pose, sensor noise, beacons).
+    pub fn from_map(self, map: &WorldMap) -> Result<Box<dyn Estimator>, LocalizationError> {
+        match self {
+            EstimatorKind::Ekf => Ok(Box::new(Ekf::from_map(map))),
+            other => Err(LocalizationError::NotImplemented(other.name())),
+        }
+    }
+}
+
+impl core::str::FromStr for EstimatorKind {
+    type Err = LocalizationError;
+    /// Parses an `--estimator` name, case-insensitively.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "bayes" | "histogram" => Ok(EstimatorKind::Bayes),
+            "kf" | "kalman" => Ok(EstimatorKind::Kf),
+            "ekf" => Ok(EstimatorKind::Ekf),
+            "pf" | "particle" => Ok(EstimatorKind::Pf),
+            _ => Err(LocalizationError::UnknownEstimator(s.to_owned())),
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod test_support {
+    use mole_types::WorldMap;
+
+    /// A zeroed, boxed map (it is ~50 kB: never on the stack).
+    pub fn zeroed_map() -> Box<WorldMap> {
+        bytemuck::zeroed_box()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn estimator_names_parse_and_map_to_ids() {
+        for kind in [
+            EstimatorKind::Bayes,
+            EstimatorKind::Kf,
+            EstimatorKind::Ekf,
+            EstimatorKind::Pf,
+        ] {
+            assert_eq!(kind.name().parse::<EstimatorKind>(), Ok(kind));
+        }
+        assert_eq!(" EKF ".parse::<EstimatorKind>(), Ok(EstimatorKind::Ekf));
+        assert_eq!(EstimatorKind::Ekf.id(), ESTIMATOR_EKF);
+        assert_eq!(EstimatorKind::Pf.id(), ESTIMATOR_PF);
+        assert!(matches!(
+            "ukf".parse::<EstimatorKind>(),
+            Err(LocalizationError::UnknownEstimator(_))
+        ));
+    }
+
+    #[test]
+    fn from_map_builds_the_ekf_and_refuses_the_rest_for_now() {
+        let mut map = test_support::zeroed_map();
+        map.start_x = 1.0;
+        let ekf = EstimatorKind::Ekf.from_map(&map).unwrap();
+        assert_eq!(ekf.id(), ESTIMATOR_EKF);
+        assert_eq!(ekf.pose().x, 1.0);
+        assert!(matches!(
+            EstimatorKind::Pf.from_map(&map),
+            Err(LocalizationError::NotImplemented("pf"))
+        ));
+    }
+}

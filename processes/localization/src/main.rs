@@ -1,0 +1,107 @@
+//! The localization process: estimates the pose from odometry, beacons and position fixes.
+//!
+//! world/map once, then sensing/{odom, beacons, fix} every step → localization/pose.
+
+use clap::Parser;
+use mole_localization::{Estimator, EstimatorKind};
+use mole_runtime::{CommonArgs, Context, StepGate, Wake, now_ns};
+use mole_types::topics;
+use std::process::ExitCode;
+
+#[derive(Debug, Parser)]
+#[command(name = "mole-localization", about = "mole's pose estimators (seed §6)")]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+    /// Estimator: bayes, kf, ekf or pf.
+    #[arg(long, env = "MOLE_ESTIMATOR", default_value = "ekf")]
+    estimator: String,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let kind = match args.estimator.parse::<EstimatorKind>() {
+        Ok(kind) => kind,
+        Err(e) => {
+            eprintln!("error: --estimator: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if kind != EstimatorKind::Ekf {
+        eprintln!(
+            "error: --estimator: `{}` is not implemented yet; available: ekf",
+            kind.name()
+        );
+        return ExitCode::from(2);
+    }
+    match run(&args, kind) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error>> {
+    let mut ctx = Context::new("localization", &args.common)?;
+    let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
+    let mut odom_sub = ctx.subscriber(topics::SENSING_ODOM)?;
+    let mut beacons_sub = ctx.subscriber(topics::SENSING_BEACONS)?;
+    let mut fix_sub = ctx.subscriber(topics::SENSING_FIX)?;
+    let mut pose_pub = ctx.publisher(topics::LOCALIZATION_POSE)?;
+    let waitset = ctx.waitset()?;
+    let wakers = [
+        map_sub.waker(),
+        odom_sub.waker(),
+        beacons_sub.waker(),
+        fix_sub.waker(),
+    ];
+    let _attached = wakers
+        .iter()
+        .map(|w| waitset.attach(w))
+        .collect::<Result<Vec<_>, _>>()?;
+    ctx.ready();
+
+    let mut estimator: Option<Box<dyn Estimator>> = None;
+    let mut gate = StepGate::new(ctx.mode());
+    loop {
+        if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
+            return Ok(());
+        }
+        if estimator.is_none()
+            && map_sub.update()
+            && let Some(map) = map_sub.latest()
+        {
+            estimator = Some(kind.from_map(map)?);
+            tracing::info!(estimator = kind.name(), "map received");
+        }
+        let Some(estimator) = estimator.as_mut() else {
+            continue;
+        };
+        odom_sub.update();
+        beacons_sub.update();
+        fix_sub.update();
+        let ticks = [odom_sub.tick(), beacons_sub.tick(), fix_sub.tick()];
+        let Some(tick) = gate.ready(&ticks) else {
+            continue;
+        };
+        let (Some(odom), Some(beacons), Some(fix)) =
+            (odom_sub.latest(), beacons_sub.latest(), fix_sub.latest())
+        else {
+            continue;
+        };
+        let started = now_ns();
+        estimator.predict(odom);
+        // Realtime may miss a step's readings: never correct twice with the same ones.
+        if beacons.header.tick == tick && fix.header.tick == tick {
+            estimator.correct(beacons, fix);
+        }
+        let update_ns = now_ns().saturating_sub(started);
+        pose_pub.publish(tick, odom.header.origin_ns, |pose| {
+            estimator.write_pose(pose);
+            pose.update_ns = update_ns;
+        })?;
+        ctx.count_step();
+    }
+}

@@ -1,0 +1,114 @@
+//! The mapping process: builds the frontier grid (seed §5.2) from scans and the contact grid
+//! (seed §2) from touch, both placed with the estimated pose.
+//!
+//! world/map once, then localization/pose, sensing/scan and sensing/tactile every step →
+//! mapping/grid and mapping/contact.
+
+use clap::Parser;
+use mole_mapping::{ContactGrid, FrontierGrid};
+use mole_runtime::{CommonArgs, Context, StepGate, Wake};
+use mole_types::{Pose2, topics};
+use std::process::ExitCode;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "mole-mapping",
+    about = "mole's maps: frontier grid from range, contact grid from touch"
+)]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+    /// A tactile sensor reading above this force (N) is a touch.
+    #[arg(long, env = "MOLE_TOUCH_THRESHOLD", default_value_t = 0.5)]
+    touch_threshold: f64,
+}
+
+struct Maps {
+    frontier: FrontierGrid,
+    contact: ContactGrid,
+    robot_radius: f64,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
+    let mut ctx = Context::new("mapping", &args.common)?;
+    let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
+    let mut pose_sub = ctx.subscriber(topics::LOCALIZATION_POSE)?;
+    let mut scan_sub = ctx.subscriber(topics::SENSING_SCAN)?;
+    let mut tactile_sub = ctx.subscriber(topics::SENSING_TACTILE)?;
+    let mut grid_pub = ctx.publisher(topics::MAPPING_GRID)?;
+    let mut contact_pub = ctx.publisher(topics::MAPPING_CONTACT)?;
+    let waitset = ctx.waitset()?;
+    let wakers = [
+        map_sub.waker(),
+        pose_sub.waker(),
+        scan_sub.waker(),
+        tactile_sub.waker(),
+    ];
+    let _attached = wakers
+        .iter()
+        .map(|w| waitset.attach(w))
+        .collect::<Result<Vec<_>, _>>()?;
+    ctx.ready();
+
+    let mut maps: Option<Maps> = None;
+    let mut gate = StepGate::new(ctx.mode());
+    loop {
+        if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
+            return Ok(());
+        }
+        if maps.is_none()
+            && map_sub.update()
+            && let Some(map) = map_sub.latest()
+        {
+            let (w, h, res) = (map.arena_width, map.arena_height, map.grid_resolution);
+            maps = Some(Maps {
+                frontier: FrontierGrid::new(w, h, res)?,
+                contact: ContactGrid::new(w, h, res)?,
+                robot_radius: map.robot.radius,
+            });
+            tracing::info!(width_m = w, height_m = h, resolution = res, "map received");
+        }
+        let Some(maps) = maps.as_mut() else { continue };
+        pose_sub.update();
+        scan_sub.update();
+        tactile_sub.update();
+        let ticks = [pose_sub.tick(), scan_sub.tick(), tactile_sub.tick()];
+        let Some(tick) = gate.ready(&ticks) else {
+            continue;
+        };
+        let (Some(pose), Some(scan), Some(tactile)) =
+            (pose_sub.latest(), scan_sub.latest(), tactile_sub.latest())
+        else {
+            continue;
+        };
+        let estimate = Pose2::new(pose.x, pose.y, pose.theta);
+        maps.frontier
+            .integrate_footprint(estimate, maps.robot_radius);
+        if scan.header.tick == tick {
+            maps.frontier.integrate_scan(estimate, scan);
+        }
+        if tactile.header.tick == tick {
+            let touched = maps
+                .contact
+                .integrate_tactile(estimate, tactile, args.touch_threshold);
+            for &(x, y) in touched {
+                maps.frontier.mark_occupied(x, y);
+            }
+        }
+        let origin = pose.header.origin_ns;
+        grid_pub.publish(tick, origin, |grid| maps.frontier.write(grid))?;
+        contact_pub.publish(tick, origin, |grid| maps.contact.write(grid))?;
+        ctx.count_step();
+    }
+}

@@ -1,0 +1,148 @@
+//! The monitor process: observes everything, judges it against ground truth, and writes
+//! summary.json and map.png when the run ends.
+//!
+//! Every topic in → monitor/status (a few times a second) and, at the end, the two files.
+
+use clap::Parser;
+use mole_monitor::{Monitor, RunMeta, write_summary};
+use mole_runtime::{CommonArgs, Context, Wake, now_ns};
+use mole_types::{END_EXPLORATION_COMPLETE, END_GOAL_REACHED, END_STOPPED, END_TICKS, topics};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+const STATUS_PERIOD: Duration = Duration::from_millis(200);
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "mole-monitor",
+    about = "mole's observer: metrics, summary.json, map.png"
+)]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+    /// Where summary.json and map.png go.
+    #[arg(long, env = "MOLE_OUT", default_value = "runs/latest")]
+    out: PathBuf,
+    /// The planner's name, for the summary.
+    #[arg(long, env = "MOLE_PLANNER", default_value = "random-walk")]
+    planner: String,
+    /// The estimator's name, for the summary.
+    #[arg(long, env = "MOLE_ESTIMATOR", default_value = "ekf")]
+    estimator: String,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn end_reason(code: u32) -> &'static str {
+    match code {
+        END_TICKS => "ticks",
+        END_GOAL_REACHED => "goal_reached",
+        END_STOPPED => "stopped",
+        END_EXPLORATION_COMPLETE => "exploration_complete",
+        _ => "interrupted",
+    }
+}
+
+fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
+    let mut ctx = Context::new("monitor", &args.common)?;
+    let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
+    let mut truth_sub = ctx.subscriber(topics::WORLD_TRUTH)?;
+    let mut pose_sub = ctx.subscriber(topics::LOCALIZATION_POSE)?;
+    let mut grid_sub = ctx.subscriber(topics::MAPPING_GRID)?;
+    let mut contact_sub = ctx.subscriber(topics::MAPPING_CONTACT)?;
+    let mut particles_sub = ctx.subscriber(topics::LOCALIZATION_PARTICLES)?;
+    let mut plan_sub = ctx.subscriber(topics::PLANNING_STATUS)?;
+    let mut stats_sub = ctx.subscriber(topics::STACK_STATS)?;
+    let mut status_pub = ctx.publisher(topics::MONITOR_STATUS)?;
+    let waitset = ctx.waitset()?;
+    let wakers = [
+        map_sub.waker(),
+        truth_sub.waker(),
+        pose_sub.waker(),
+        grid_sub.waker(),
+    ];
+    let _attached = wakers
+        .iter()
+        .map(|w| waitset.attach(w))
+        .collect::<Result<Vec<_>, _>>()?;
+    ctx.ready();
+
+    let mut monitor: Option<Monitor> = None;
+    let mut started: Option<Instant> = None;
+    let mut next_status = Instant::now() + STATUS_PERIOD;
+    let mut end: Option<u32> = None;
+    loop {
+        let wake = waitset.wait(&mut ctx, Some(next_status))?;
+        if monitor.is_none()
+            && map_sub.update()
+            && let Some(map) = map_sub.latest()
+        {
+            monitor = Some(Monitor::new(map)?);
+            tracing::info!("map received");
+        }
+        let Some(m) = monitor.as_mut() else {
+            if wake == Wake::Shutdown {
+                return Ok(());
+            }
+            next_status = Instant::now() + STATUS_PERIOD;
+            continue;
+        };
+        // Truth first: every estimate, grid and status of a step was derived from a truth
+        // that is already in its queue.
+        truth_sub.drain(|t| {
+            m.on_truth(t);
+            if t.is_end() {
+                end = Some(t.end_reason);
+            }
+        });
+        started.get_or_insert_with(Instant::now);
+        pose_sub.drain(|p| m.on_pose(p));
+        grid_sub.drain(|g| m.on_grid(g));
+        contact_sub.drain(|g| m.on_contact(g));
+        particles_sub.drain(|p| m.on_particles(p));
+        plan_sub.drain(|s| m.on_plan_status(s));
+        stats_sub.drain(|s| m.on_stats(s));
+
+        let finished = end.is_some() || wake == Wake::Shutdown;
+        if finished || Instant::now() >= next_status {
+            next_status = Instant::now() + STATUS_PERIOD;
+            let tick = truth_sub.tick().unwrap_or(0);
+            if finished {
+                let reason = end.map_or("interrupted", end_reason);
+                let meta = RunMeta {
+                    planner: args.planner.clone(),
+                    estimator: args.estimator.clone(),
+                    mode: ctx.mode().to_string(),
+                    seed: map_sub
+                        .latest()
+                        .map_or(0, |map| ctx.seed().unwrap_or(map.seed)),
+                    wall_time_s: started.map_or(0.0, |s| s.elapsed().as_secs_f64()),
+                    exit_reason: reason.to_string(),
+                    restarts: BTreeMap::new(),
+                };
+                std::fs::create_dir_all(&args.out)?;
+                write_summary(&m.summary(&meta), &args.out.join("summary.json"))?;
+                m.render_png(&args.out.join("map.png"))?;
+                tracing::info!(out = %args.out.display(), exit_reason = reason, "summary written");
+            }
+            status_pub.publish(tick, now_ns(), |s| {
+                m.write_status(s);
+                s.finished = u32::from(finished);
+            })?;
+            if finished {
+                return Ok(());
+            }
+        }
+    }
+}

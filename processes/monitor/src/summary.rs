@@ -1,0 +1,136 @@
+//! summary.json: the run's outcome in one file (DESIGN.md, "Interfaces that users and tests
+//! rely on"), with a fixed field order so two runs diff cleanly.
+
+use crate::MonitorError;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What the launcher knows and the monitor cannot see.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunMeta {
+    pub planner: String,
+    pub estimator: String,
+    /// `realtime` or `lockstep`.
+    pub mode: String,
+    pub seed: u64,
+    pub wall_time_s: f64,
+    pub exit_reason: String,
+    /// Restarts per process role.
+    pub restarts: BTreeMap<String, u32>,
+}
+
+/// Loop latency over the run (µs); `null` when no command latency was seen.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct LatencyUs {
+    pub p50: Option<f64>,
+    pub p99: Option<f64>,
+    pub max: Option<f64>,
+}
+
+/// Estimator update time per step (µs); `null` when no pose was seen.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct UpdateUs {
+    pub p50: Option<f64>,
+    pub p99: Option<f64>,
+}
+
+/// One topic over every process's ports.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct TopicSummary {
+    /// The highest subscriber-side rate any process reported (the publisher rate when no
+    /// subscriber reported the topic).
+    pub rate_hz: f64,
+    /// Lost messages summed over every port of every process.
+    pub dropped: u64,
+    /// Messages refused by `validate()`, summed over every port of every process.
+    pub invalid: u64,
+}
+
+/// The content of summary.json, fields in the order they are written.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Steps simulated (the last truth's tick).
+    pub ticks: u64,
+    /// `ticks · dt`.
+    pub sim_time_s: f64,
+    pub wall_time_s: f64,
+    pub planner: String,
+    pub estimator: String,
+    pub mode: String,
+    pub seed: u64,
+    pub goal_reached: bool,
+    /// Tick of the first truth within the goal tolerance, times dt.
+    pub time_to_goal_s: Option<f64>,
+    /// Length of the true trajectory (every step, not the decimated one).
+    pub path_length_m: f64,
+    /// Fraction of the reachable free cells the final frontier grid marks explored.
+    pub coverage: f64,
+    /// Contact cells within one cell of a truly occupied cell, over all contact cells.
+    pub contact_map_precision: Option<f64>,
+    /// IoU of occupied cells over the explored cells (see `Monitor::map_iou`).
+    pub map_iou: Option<f64>,
+    /// √(mean squared position error) of the pose estimate against the truth of the same tick.
+    pub localization_rmse_m: Option<f64>,
+    pub max_penetration_m: f64,
+    pub loop_latency_us: LatencyUs,
+    pub topics: BTreeMap<String, TopicSummary>,
+    pub restarts: BTreeMap<String, u32>,
+    pub exit_reason: String,
+    /// Mean normalised estimation error squared over (x, y, θ); 3 for a consistent filter.
+    pub mean_nees: Option<f64>,
+    pub estimator_update_us: UpdateUs,
+    pub bounces: u32,
+    /// FNV-1a 64 of the final frontier grid's cells, 16 hex digits.
+    pub grid_hash: Option<String>,
+    /// FNV-1a 64 of the final contact grid's cells, 16 hex digits.
+    pub contact_hash: Option<String>,
+    pub reachable_free_cells: u64,
+    /// Why the world ended the run (`ticks`, `goal_reached`, `stopped`,
+    /// `exploration_complete`); `null` when no final truth arrived.
+    pub end_reason: Option<String>,
+    /// The planner reported that no reachable frontier is left.
+    pub exploration_complete: bool,
+    /// Times the robot came into contact (rising edges of the contact flag).
+    pub contact_events: u64,
+    /// Steps spent in contact.
+    pub contact_ticks: u64,
+    /// Poses matched to a truth of the same tick (the RMSE's sample count).
+    pub pose_samples: u64,
+    /// Poses whose covariance was positive definite (the NEES's sample count).
+    pub nees_samples: u64,
+    /// Grids refused for their size, resolution, origin or kind, and stats beyond capacity.
+    pub ignored_messages: u64,
+}
+
+/// Writes the summary as pretty JSON (with a final newline).
+pub fn write_summary(summary: &Summary, path: &Path) -> Result<(), MonitorError> {
+    let mut text = serde_json::to_string_pretty(summary)?;
+    text.push('\n');
+    std::fs::write(path, text).map_err(|source| MonitorError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// FNV-1a 64 of a byte slice (Fowler, Noll, Vo).
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
+    let mut hash = 0xcbf2_9ce4_8422_2325_u64;
+    for b in bytes {
+        hash ^= u64::from(*b);
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    hash
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fnv1a64_matches_reference_vectors() {
+        assert_eq!(fnv1a64(b""), 0xcbf29ce484222325);
+        assert_eq!(fnv1a64(b"a"), 0xaf63dc4c8601ec8c);
+        assert_eq!(fnv1a64(b"foobar"), 0x85944171f73967e8);
+    }
+}
