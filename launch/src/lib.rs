@@ -1,1 +1,22 @@
-//! The mole launcher: launch files, supervision, swapping, measuring
+//! The mole launcher library: launch files, start order, `--swap` and process supervision.
+//!
+//! The `mole` binary (src/main.rs) wires these to the command line and to the stack's IPC:
+//! [`load_launch_file`] → [`apply_swaps`] → [`start_order`] → [`Supervisor::spawn`] each process
+//! → [`Supervisor::poll`] while running → [`Supervisor::shutdown`] in [`stop_order`].
+
+mod error;
+pub mod launch_file;
+pub mod order;
+pub mod supervisor;
+pub mod swap;
+
+pub use error::LaunchError;
+pub use launch_file::{
+    DEFAULT_LAUNCH_FILE, LaunchFile, Mode, ProcessSpec, RestartPolicy, RestartWhen, StackOverrides,
+    StackSpec, load_launch_file, parse_launch_file, resolve_data_path,
+};
+pub use order::{start_order, stop_order};
+pub use supervisor::{
+    ChildSpec, ExitStatus, Supervisor, SupervisorEvent, resolve_program, resolve_program_in,
+};
+pub use swap::{apply_swaps, parse_swap};

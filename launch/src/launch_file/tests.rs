@@ -1,0 +1,404 @@
+use super::*;
+use proptest::prelude::*;
+
+const VALID: &str = r#"[stack]
+scenario = "scenarios/default.toml"
+mode = "realtime"
+rate_hz = 100
+ticks = 3000
+planner = "random-walk"
+estimator = "ekf"
+shutdown_timeout_ms = 3000
+
+[[process]]
+role = "sensing"
+command = "mole-sensing"
+restart = { policy = "on-failure", backoff_ms = 200, max = 5 }
+
+[[process]]
+role = "planning"
+command = "mole-planning"
+args = ["--verbose"]
+env = { RUST_LOG = "info" }
+restart = { policy = "always" }
+
+[[process]]
+role = "world"
+command = "mole-world"
+depends_on = ["sensing", "planning"]
+"#;
+
+fn parse(text: &str) -> Result<LaunchFile, LaunchError> {
+    parse_launch_file(text, Path::new("launch/stacks/x.toml"))
+}
+
+fn err(text: &str) -> String {
+    match parse(text) {
+        Ok(_) => panic!("expected an error for:\n{text}"),
+        Err(e) => {
+            assert_eq!(e.exit_code(), 2);
+            let msg = e.to_string();
+            assert!(!msg.contains('\n'), "one line: {msg}");
+            msg
+        }
+    }
+}
+
+#[test]
+fn valid_file_parses_with_defaults() {
+    let lf = parse(VALID).unwrap();
+    assert_eq!(lf.stack.mode, Mode::Realtime);
+    assert_eq!(lf.stack.rate_hz, 100.0);
+    assert_eq!(lf.stack.ticks, Some(3000));
+    assert_eq!(lf.stack.duration_s, None);
+    assert_eq!(
+        lf.stack.scenario.as_deref(),
+        Some(Path::new("scenarios/default.toml"))
+    );
+    assert_eq!(lf.roles(), ["sensing", "planning", "world"]);
+    let s = lf.process("sensing").unwrap();
+    assert_eq!(s.restart.policy, RestartWhen::OnFailure);
+    assert_eq!((s.restart.backoff_ms, s.restart.max), (200, 5));
+    assert_eq!(s.restart.max_backoff_ms, 5000);
+    let p = lf.process("planning").unwrap();
+    assert_eq!(p.args, ["--verbose"]);
+    assert_eq!(p.env.get("RUST_LOG").map(String::as_str), Some("info"));
+    assert_eq!(p.restart.policy, RestartWhen::Always);
+    let w = lf.process("world").unwrap();
+    assert_eq!(w.restart, RestartPolicy::default());
+    assert_eq!(w.restart.policy, RestartWhen::Never);
+    assert_eq!(w.depends_on, ["sensing", "planning"]);
+}
+
+#[test]
+fn empty_file_is_an_empty_stack_with_defaults() {
+    let lf = parse("").unwrap();
+    assert!(lf.processes.is_empty());
+    assert_eq!(lf.stack, StackSpec::default());
+}
+
+#[test]
+fn unknown_policy_names_file_line_column_field_and_choices() {
+    let text = VALID.replace("policy = \"always\"", "policy = \"sometimes\"");
+    let msg = err(&text);
+    // line 20: `restart = { policy = "sometimes" }`, the value starts at column 22.
+    assert_eq!(
+        msg,
+        "launch/stacks/x.toml:20:22: field `process[1].restart.policy`: unknown variant \
+         `sometimes`, expected one of `never`, `on-failure`, `always`"
+    );
+}
+
+#[test]
+fn unknown_field_is_denied() {
+    let msg = err(&VALID.replace("args = [", "argz = ["));
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:18:1: field `process[1].argz`"),
+        "{msg}"
+    );
+    assert!(msg.contains("process[1]"), "{msg}");
+    assert!(msg.contains("unknown field `argz`"), "{msg}");
+    assert!(msg.contains("expected one of"), "{msg}");
+
+    let msg = err(&VALID.replace("planner =", "plannr ="));
+    assert!(msg.starts_with("launch/stacks/x.toml:6:"), "{msg}");
+    assert!(msg.contains("unknown field `plannr`"), "{msg}");
+
+    let msg = err(&format!("{VALID}\n[extra]\nx = 1\n"));
+    assert!(msg.contains("unknown field `extra`"), "{msg}");
+}
+
+#[test]
+fn wrong_type_names_the_field_and_expected_type() {
+    let msg = err(&VALID.replace("ticks = 3000", "ticks = \"many\""));
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:5:9: field `stack.ticks`"),
+        "{msg}"
+    );
+    assert!(msg.contains("invalid type"), "{msg}");
+    assert!(msg.contains("u64"), "{msg}");
+
+    let msg = err(&VALID.replace("args = [\"--verbose\"]", "args = \"--verbose\""));
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:18:8: field `process[1].args`"),
+        "{msg}"
+    );
+    assert!(msg.contains("expected a sequence"), "{msg}");
+
+    let msg = err(&VALID.replace("max = 5", "max = -1"));
+    assert!(msg.contains("field `process[0].restart.max`"), "{msg}");
+}
+
+#[test]
+fn missing_field_names_the_table() {
+    let msg = err("[[process]]\nrole = \"a\"\n");
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:1:1: field `process[0]`"),
+        "{msg}"
+    );
+    assert!(msg.contains("missing field `command`"), "{msg}");
+}
+
+#[test]
+fn syntax_error_has_a_location() {
+    let msg = err("[stack]\nmode = \n");
+    assert!(msg.starts_with("launch/stacks/x.toml:2:"), "{msg}");
+    let msg = err("[stack\n");
+    assert!(msg.starts_with("launch/stacks/x.toml:1:"), "{msg}");
+}
+
+#[test]
+fn bad_mode() {
+    let msg = err(&VALID.replace("\"realtime\"", "\"fast\""));
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:3:8: field `stack.mode`"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("unknown variant `fast`, expected `realtime` or `lockstep`"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn duplicate_role() {
+    let msg = err(&VALID.replace("role = \"planning\"", "role = \"sensing\""));
+    assert_eq!(
+        msg,
+        "launch/stacks/x.toml:16:8: field `process[1].role`: duplicate role `sensing` (first \
+         defined on line 11), expected every role once"
+    );
+}
+
+#[test]
+fn unknown_depends_on() {
+    let msg = err(&VALID.replace("[\"sensing\", \"planning\"]", "[\"sensing\", \"planing\"]"));
+    assert_eq!(
+        msg,
+        "launch/stacks/x.toml:25:26: field `process[2].depends_on[1]`: unknown role `planing`, \
+         expected one of: sensing, planning, world"
+    );
+}
+
+#[test]
+fn cycle_names_the_cycle_and_its_line() {
+    let text = VALID.replace(
+        "command = \"mole-sensing\"",
+        "command = \"mole-sensing\"\ndepends_on = [\"world\"]",
+    );
+    let msg = err(&text);
+    assert_eq!(
+        msg,
+        "launch/stacks/x.toml:13:15: field `process[0].depends_on[0]`: dependency cycle \
+         sensing -> world -> sensing, expected processes that depend on each other without a circle"
+    );
+}
+
+#[test]
+fn empty_command_and_bad_role() {
+    let msg = err(&VALID.replace("\"mole-planning\"", "\"  \""));
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:17:11: field `process[1].command`: empty command"),
+        "{msg}"
+    );
+    let msg = err(&VALID.replace("role = \"planning\"", "role = \"plan ning\""));
+    assert!(
+        msg.contains("field `process[1].role`: invalid role `plan ning`"),
+        "{msg}"
+    );
+    let msg = err(&VALID.replace("role = \"planning\"", "role = \"../x\""));
+    assert!(msg.contains("invalid role"), "{msg}");
+}
+
+#[test]
+fn rate_and_run_length_are_checked() {
+    let msg = err(&VALID.replace("rate_hz = 100", "rate_hz = 0"));
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:4:11: field `stack.rate_hz`"),
+        "{msg}"
+    );
+    assert!(msg.contains("expected a number > 0"), "{msg}");
+    let msg = err(&VALID.replace("rate_hz = 100", "rate_hz = -5.5"));
+    assert!(msg.contains("stack.rate_hz"), "{msg}");
+    let msg = err(&VALID.replace("ticks = 3000", "ticks = 3000\nduration_s = 30"));
+    assert!(
+        msg.starts_with("launch/stacks/x.toml:6:14: field `stack.duration_s`"),
+        "{msg}"
+    );
+    assert!(msg.contains("both `ticks` and `duration_s`"), "{msg}");
+    let msg = err(&VALID.replace("ticks = 3000", "ticks = 0"));
+    assert!(msg.contains("stack.ticks"), "{msg}");
+    let msg = err(&VALID.replace("ticks = 3000", "duration_s = nan"));
+    assert!(msg.contains("stack.duration_s"), "{msg}");
+
+    let lf = parse(&VALID.replace("ticks = 3000", "duration_s = 2.5")).unwrap();
+    assert_eq!((lf.stack.ticks, lf.stack.duration_s), (None, Some(2.5)));
+}
+
+#[test]
+fn backoff_bounds_are_checked() {
+    let msg = err(&VALID.replace("backoff_ms = 200", "backoff_ms = 200, max_backoff_ms = 100"));
+    assert!(
+        msg.contains("field `process[0].restart.max_backoff_ms`"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn missing_file_is_a_read_error() {
+    let e = load_launch_file(Path::new("/nonexistent/launch.toml")).unwrap_err();
+    assert!(matches!(e, LaunchError::Read { .. }));
+    assert!(
+        e.to_string()
+            .starts_with("/nonexistent/launch.toml: cannot read launch file")
+    );
+    assert_eq!(e.exit_code(), 2);
+}
+
+#[test]
+fn line_column_counts_chars() {
+    let t = "ab\ncäd\n";
+    assert_eq!(line_column(t, 0), (1, 1));
+    assert_eq!(line_column(t, 3), (2, 1));
+    assert_eq!(line_column(t, 6), (2, 3)); // 'd' after the two-byte 'ä'
+    assert_eq!(line_column(t, 1000), (3, 1));
+}
+
+#[test]
+fn overrides_replace_the_run_length() {
+    let mut stack = parse(VALID).unwrap().stack;
+    StackOverrides {
+        duration_s: Some(4.0),
+        planner: Some("apf".to_owned()),
+        mode: Some(Mode::Lockstep),
+        ..Default::default()
+    }
+    .apply(&mut stack);
+    assert_eq!((stack.ticks, stack.duration_s), (None, Some(4.0)));
+    assert_eq!(stack.planner, "apf");
+    assert_eq!(stack.mode, Mode::Lockstep);
+    assert_eq!(stack.estimator, "ekf");
+    assert_eq!("lockstep".parse::<Mode>(), Ok(Mode::Lockstep));
+    assert!("x".parse::<Mode>().is_err());
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mole-launch-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn data_paths_resolve_cwd_first_then_up_to_the_workspace_root() {
+    let root = temp_dir("resolve");
+    let ws = root.join("ws");
+    std::fs::create_dir_all(ws.join("launch/stacks")).unwrap();
+    std::fs::create_dir_all(ws.join("scenarios")).unwrap();
+    std::fs::create_dir_all(root.join("elsewhere/scenarios")).unwrap();
+    std::fs::write(ws.join("Cargo.toml"), "[workspace]\nmembers = []\n").unwrap();
+    std::fs::write(ws.join("scenarios/a.toml"), "").unwrap();
+    std::fs::write(root.join("elsewhere/scenarios/a.toml"), "").unwrap();
+    std::fs::write(root.join("outside.toml"), "").unwrap();
+    let launch = ws.join("launch/stacks/default.toml");
+    let rel = Path::new("scenarios/a.toml");
+
+    // From an unrelated directory: found by walking up from the launch file.
+    let other = root.join("nowhere");
+    std::fs::create_dir_all(&other).unwrap();
+    assert_eq!(
+        resolve_data_path("scenario", rel, &launch, &other).unwrap(),
+        ws.join("scenarios/a.toml")
+    );
+    // The current directory wins.
+    assert_eq!(
+        resolve_data_path("scenario", rel, &launch, &root.join("elsewhere")).unwrap(),
+        root.join("elsewhere/scenarios/a.toml")
+    );
+    // A relative launch file path resolves against cwd.
+    assert_eq!(
+        resolve_data_path("scenario", rel, Path::new("launch/stacks/x.toml"), &ws).unwrap(),
+        ws.join("scenarios/a.toml")
+    );
+    // The walk stops at the workspace root.
+    let e = resolve_data_path("scenario", Path::new("outside.toml"), &launch, &other).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with("scenario `outside.toml` not found (looked in: "),
+        "{msg}"
+    );
+    assert!(msg.contains(&ws.display().to_string()), "{msg}");
+    assert!(!msg.contains(&format!("{}, ", root.display())), "{msg}");
+    assert_eq!(e.exit_code(), 2);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn shipped_stacks_load() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("stacks");
+    for (name, mode, ticks) in [
+        ("default.toml", Mode::Realtime, 3000),
+        ("lockstep.toml", Mode::Lockstep, 5000),
+    ] {
+        let lf = load_launch_file(&dir.join(name)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(lf.stack.mode, mode);
+        assert_eq!(lf.stack.ticks, Some(ticks));
+        assert_eq!(lf.stack.rate_hz, 100.0);
+        assert_eq!(lf.stack.planner, "random-walk");
+        assert_eq!(lf.stack.estimator, "ekf");
+        assert_eq!(
+            lf.stack.scenario.as_deref(),
+            Some(Path::new("scenarios/default.toml"))
+        );
+        let roles = [
+            "world",
+            "sensing",
+            "localization",
+            "mapping",
+            "planning",
+            "monitor",
+        ];
+        assert_eq!(lf.roles(), roles);
+        for p in &lf.processes {
+            assert_eq!(p.command, format!("mole-{}", p.role));
+            if p.role == "world" {
+                assert_eq!(p.restart.policy, RestartWhen::Never);
+                assert_eq!(p.depends_on, roles[1..]);
+            } else {
+                assert_eq!(p.restart.policy, RestartWhen::OnFailure);
+                assert_eq!(p.restart.max, 5);
+            }
+        }
+        let order = crate::start_order(&lf.processes).unwrap();
+        assert_eq!(lf.processes[*order.last().unwrap()].role, "world");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_text_never_panics(s in "\\PC{0,200}") {
+        let _ = parse(&s);
+    }
+
+    /// Mutations of a valid file: delete, insert or replace a byte range.
+    #[test]
+    fn mutated_valid_file_never_panics(
+        at in 0usize..VALID.len(),
+        len in 0usize..12,
+        insert in "[\\[\\]{}=\",.a-z0-9 \\n#'-]{0,6}",
+    ) {
+        let mut text: Vec<char> = VALID.chars().collect();
+        let at = at.min(text.len());
+        let end = (at + len).min(text.len());
+        text.splice(at..end, insert.chars());
+        let text: String = text.into_iter().collect();
+        if let Err(e) = parse(&text) {
+            let msg = e.to_string();
+            prop_assert!(msg.starts_with("launch/stacks/x.toml:"), "{}", msg);
+            prop_assert!(!msg.contains('\n'), "{}", msg);
+            prop_assert_eq!(e.exit_code(), 2);
+        }
+    }
+}
