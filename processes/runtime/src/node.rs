@@ -312,7 +312,10 @@ impl Context {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
-        Ok(WaitSet { waitset })
+        Ok(WaitSet {
+            waitset,
+            listeners: core::cell::RefCell::new(Vec::new()),
+        })
     }
 
     /// Announces that every port exists: publishes the first statistics at once, which is what
@@ -398,6 +401,9 @@ pub enum Wake {
 /// Sleeps until data on an attached subscriber, a deadline, or a shutdown.
 pub struct WaitSet {
     waitset: iceoryx2::waitset::WaitSet<ipc::Service>,
+    /// Every attached listener: drained on each wake-up, so a topic the process no longer
+    /// reads (world/map after the first sample) cannot keep the WaitSet awake.
+    listeners: core::cell::RefCell<Vec<Rc<iceoryx2::port::listener::Listener<ipc::Service>>>>,
 }
 
 /// Keeps a subscriber attached to a [`WaitSet`] while it lives.
@@ -412,6 +418,7 @@ impl WaitSet {
             .waitset
             .attach_notification(&*waker.listener)
             .map_err(|e| RuntimeError::Wait(format!("attach {}: {e:?}", waker.topic)))?;
+        self.listeners.borrow_mut().push(waker.listener.clone());
         Ok(Attachment { _guard: guard })
     }
 
@@ -449,6 +456,11 @@ impl WaitSet {
                 WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {}
             }
             if woke {
+                // Consume the wake-up signals before the caller reads the samples: a sample
+                // that arrives after this point leaves its signal pending for the next wait.
+                for listener in self.listeners.borrow().iter() {
+                    let _ = listener.try_wait(|_| {});
+                }
                 return Ok(Wake::Data);
             }
         }
