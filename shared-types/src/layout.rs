@@ -195,7 +195,10 @@ mod tests {
 
     #[test]
     fn short_type_names_drop_module_paths() {
-        assert_eq!(short_type_name("[mole_types::geometry::Square; 2048]"), "[Square; 2048]");
+        assert_eq!(
+            short_type_name("[mole_types::geometry::Square; 2048]"),
+            "[Square; 2048]"
+        );
         assert_eq!(short_type_name("f64"), "f64");
         assert_eq!(short_type_name("[[f32; 2]; 512]"), "[[f32; 2]; 512]");
     }

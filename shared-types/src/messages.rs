@@ -149,7 +149,11 @@ impl Message for WorldMap {
         within("n_obstacles", self.n_obstacles, MAX_OBSTACLES)?;
         within("n_beacons", self.n_beacons, MAX_BEACONS)?;
         within("sensors.lidar_beams", self.sensors.lidar_beams, MAX_BEAMS)?;
-        within("sensors.tactile_sensors", self.sensors.tactile_sensors, MAX_TACTILE)?;
+        within(
+            "sensors.tactile_sensors",
+            self.sensors.tactile_sensors,
+            MAX_TACTILE,
+        )?;
         if self.has_goal > 1 {
             return Err(Invalid::UnknownCode("has_goal"));
         }
@@ -274,7 +278,14 @@ impl Message for Truth {
         }
         all_finite(
             "pose/velocity",
-            &[self.x, self.y, self.theta, self.v, self.omega, self.penetration],
+            &[
+                self.x,
+                self.y,
+                self.theta,
+                self.v,
+                self.omega,
+                self.penetration,
+            ],
         )?;
         for c in self.contacts() {
             all_finite("contacts", &[c.px, c.py, c.nx, c.ny, c.depth])?;
@@ -642,7 +653,10 @@ impl Message for Grid {
             GRID_CONTACT => 1,
             _ => return Err(Invalid::UnknownCode("kind")),
         };
-        all_finite("resolution/origin", &[self.resolution, self.origin_x, self.origin_y])?;
+        all_finite(
+            "resolution/origin",
+            &[self.resolution, self.origin_x, self.origin_y],
+        )?;
         if self.resolution <= 0.0 {
             return Err(Invalid::OutOfRange("resolution"));
         }
@@ -861,7 +875,12 @@ impl Message for Stats {
             }
             all_finite(
                 "topics.rate/latency",
-                &[t.rate_hz, t.latency_p50_us, t.latency_p99_us, t.latency_max_us],
+                &[
+                    t.rate_hz,
+                    t.latency_p50_us,
+                    t.latency_p99_us,
+                    t.latency_max_us,
+                ],
             )?;
         }
         Ok(())
@@ -971,7 +990,10 @@ mod tests {
         assert_eq!(grid.validate(), Err(Invalid::UnknownCode("cells")));
         grid.width = 1024;
         grid.height = 1024;
-        assert_eq!(grid.validate(), Err(Invalid::CountAboveCapacity("width×height")));
+        assert_eq!(
+            grid.validate(),
+            Err(Invalid::CountAboveCapacity("width×height"))
+        );
 
         let mut truth: Truth = bytemuck::Zeroable::zeroed();
         truth.flags = 8;

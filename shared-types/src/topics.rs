@@ -66,8 +66,7 @@ pub const SENSING_ODOM: Topic<Odom> = Topic::new("sensing/odom");
 pub const SENSING_BEACONS: Topic<Beacons> = Topic::new("sensing/beacons");
 pub const SENSING_FIX: Topic<Fix> = Topic::new("sensing/fix");
 pub const LOCALIZATION_POSE: Topic<Pose> = Topic::new("localization/pose").buffer(64);
-pub const LOCALIZATION_PARTICLES: Topic<Particles> =
-    Topic::new("localization/particles").buffer(2);
+pub const LOCALIZATION_PARTICLES: Topic<Particles> = Topic::new("localization/particles").buffer(2);
 pub const MAPPING_GRID: Topic<Grid> = Topic::new("mapping/grid").buffer(4);
 pub const MAPPING_CONTACT: Topic<Grid> = Topic::new("mapping/contact").buffer(4);
 pub const PLANNING_CMD: Topic<Cmd> = Topic::new("planning/cmd");
@@ -140,6 +139,9 @@ mod tests {
 
     #[test]
     fn service_names_carry_the_namespace() {
-        assert_eq!(service_name("robot0", SENSING_SCAN.name), "mole/robot0/sensing/scan");
+        assert_eq!(
+            service_name("robot0", SENSING_SCAN.name),
+            "mole/robot0/sensing/scan"
+        );
     }
 }

@@ -5,7 +5,7 @@
 
 use clap::Parser;
 use mole_monitor::{Monitor, RunMeta, write_summary};
-use mole_runtime::{CommonArgs, Context, Wake, now_ns};
+use mole_runtime::{ClockMode, CommonArgs, Context, Wake, now_ns};
 use mole_types::{END_EXPLORATION_COMPLETE, END_GOAL_REACHED, END_STOPPED, END_TICKS, topics};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -13,6 +13,8 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 const STATUS_PERIOD: Duration = Duration::from_millis(200);
+/// Lockstep: how long to wait for the last step's messages after the world's final step.
+const LOCKSTEP_DRAIN: Duration = Duration::from_secs(2);
 
 #[derive(Debug, Parser)]
 #[command(
@@ -82,6 +84,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut started: Option<Instant> = None;
     let mut next_status = Instant::now() + STATUS_PERIOD;
     let mut end: Option<u32> = None;
+    let mut end_seen: Option<Instant> = None;
     loop {
         let wake = waitset.wait(&mut ctx, Some(next_status))?;
         if monitor.is_none()
@@ -114,6 +117,23 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         plan_sub.drain(|s| m.on_plan_status(s));
         stats_sub.drain(|s| m.on_stats(s));
 
+        // Lockstep: the last step's estimate and grids were sent before the world's final
+        // step, but a publisher blocked on our full queue may still be delivering them; wait
+        // for them (briefly) so the summary is the same on every run.
+        if let Some(last) = truth_sub.tick().filter(|_| end.is_some())
+            && ctx.mode() == ClockMode::Lockstep
+            && wake != Wake::Shutdown
+        {
+            let expected = last.saturating_sub(1);
+            let behind = [pose_sub.tick(), grid_sub.tick(), contact_sub.tick()]
+                .iter()
+                .any(|t| t.is_some_and(|t| t < expected));
+            let waited = end_seen.get_or_insert_with(Instant::now).elapsed();
+            if behind && waited < LOCKSTEP_DRAIN {
+                next_status = Instant::now() + Duration::from_millis(5);
+                continue;
+            }
+        }
         let finished = end.is_some() || wake == Wake::Shutdown;
         if finished || Instant::now() >= next_status {
             next_status = Instant::now() + STATUS_PERIOD;

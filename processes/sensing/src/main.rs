@@ -65,7 +65,8 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             continue;
         };
         truth_sub.update();
-        let Some(truth) = truth_sub.latest() else {
+        // The world's final state ends the run: no step follows it, so nothing is sensed.
+        let Some(truth) = truth_sub.latest().filter(|t| !t.is_end()) else {
             continue;
         };
         let Some(tick) = gate.ready(&[truth_sub.tick()]) else {

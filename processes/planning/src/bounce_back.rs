@@ -1,0 +1,405 @@
+//! Reactive bounce-back (seed §4.1) with DESIGN.md's errata, as a layer around any [`Planner`].
+//!
+//! Trigger: d_obs < d_th, d_obs being the nearest scan range minus the robot radius in the
+//! direction of travel, or any tactile sensor above its force threshold. Then reverse,
+//! v ← −α·v (at least a minimum speed) for a fixed time, turn toward the freest direction (away
+//! from the obstacle), and hand control back to the wrapped planner with [`Planner::replan`].
+//! Hysteresis: the range trigger re-arms only once d_obs rises above d_release > d_th, or after
+//! a cooldown, so the robot does not chatter at the threshold.
+
+use crate::obstacles::{contact_force, free_travel, freest_direction, nearest_obstacle};
+use crate::{Command, Planner, PlannerInput, RobotLimits, stop_command, usable};
+use core::f64::consts::{FRAC_PI_2, FRAC_PI_3, PI};
+use mole_types::{MODE_BOUNCE_BACK, wrap_angle};
+
+/// Seed §4.1: the bounced velocity (v_x, v_y)(t+1) = −α·(v_x, v_y)(t), α ∈ (0, 1].
+pub fn bounce_back_velocity(v: [f64; 2], alpha: f64) -> [f64; 2] {
+    [-alpha * v[0], -alpha * v[1]]
+}
+
+/// Which position update [`bounce_back_position`] uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PositionUpdate {
+    /// The seed's (x, y)(t+1) = −α·(v_x, v_y)(t)·Δt, which drops x(t) (DESIGN.md errata).
+    Seed,
+    /// (x, y)(t+1) = (x, y)(t) − α·(v_x, v_y)(t)·Δt.
+    #[default]
+    Corrected,
+}
+
+/// Seed §4.1's position update after a bounce-back, in the seed's form or the corrected one.
+pub fn bounce_back_position(
+    x: [f64; 2],
+    v: [f64; 2],
+    alpha: f64,
+    dt: f64,
+    form: PositionUpdate,
+) -> [f64; 2] {
+    let [vx, vy] = bounce_back_velocity(v, alpha);
+    match form {
+        PositionUpdate::Seed => [vx * dt, vy * dt],
+        PositionUpdate::Corrected => [x[0] + vx * dt, x[1] + vy * dt],
+    }
+}
+
+/// Settings of the bounce-back layer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BounceBackConfig {
+    /// Trigger threshold d_th on d_obs (m).
+    pub d_th: f64,
+    /// Re-arm threshold d_release > d_th (m): the hysteresis band is [d_th, d_release].
+    pub d_release: f64,
+    /// The trigger re-arms anyway this long (s) after a bounce-back ended.
+    pub cooldown: f64,
+    /// α ∈ (0, 1]: reverse at α·|v|.
+    pub alpha: f64,
+    /// Reverse at least this fast (m/s), so a bounce from standstill still backs off.
+    pub min_reverse_speed: f64,
+    /// How long to reverse (s).
+    pub reverse_time: f64,
+    /// Turn until the heading is within this of the freest direction (rad)...
+    pub turn_tolerance: f64,
+    /// ...or for at most this long (s).
+    pub turn_timeout: f64,
+    /// Proportional heading gain of the turn (1/s).
+    pub k_heading: f64,
+    /// A tactile sensor touches when its |f| exceeds this (N).
+    pub force_threshold: f64,
+    /// d_obs looks at the beams within this angle (rad) of the direction of travel; π takes
+    /// every beam (the seed's form), which lets walls beside the robot trigger it.
+    pub sector_half_angle: f64,
+    /// Half-width (rad) of the neighbourhood whose shortest beam scores a direction as free.
+    pub free_window: f64,
+    /// Between bounces, cap the wrapped planner's speed so it can brake to a stop d_stop (m)
+    /// short of the first obstacle in its path: the seed flips v at once, a robot with an acceleration
+    /// limit cannot, so without the cap it would hit before the reversal takes hold.
+    pub d_stop: f64,
+}
+
+impl Default for BounceBackConfig {
+    fn default() -> Self {
+        Self {
+            d_th: 0.15,
+            d_release: 0.35,
+            cooldown: 3.0,
+            alpha: 0.5,
+            min_reverse_speed: 0.1,
+            reverse_time: 0.8,
+            turn_tolerance: 0.15,
+            turn_timeout: 3.0,
+            k_heading: 3.0,
+            force_threshold: 0.5,
+            sector_half_angle: FRAC_PI_3,
+            free_window: 0.26,
+            d_stop: 0.05,
+        }
+    }
+}
+
+impl BounceBackConfig {
+    /// The config with every non-finite or out-of-range field replaced by its default
+    /// (α clamped into (0, 1], d_release kept above d_th).
+    pub fn sanitized(self) -> Self {
+        let d = Self::default();
+        let pos = |x: f64, def: f64| if x.is_finite() && x > 0.0 { x } else { def };
+        let non_neg = |x: f64, def: f64| if x.is_finite() && x >= 0.0 { x } else { def };
+        let d_th = non_neg(self.d_th, d.d_th);
+        let d_release = non_neg(self.d_release, d.d_release);
+        let d_release = if d_release > d_th {
+            d_release
+        } else {
+            d_th + (d.d_release - d.d_th)
+        };
+        Self {
+            d_th,
+            d_release,
+            cooldown: pos(self.cooldown, d.cooldown),
+            alpha: pos(self.alpha, d.alpha).min(1.0),
+            min_reverse_speed: non_neg(self.min_reverse_speed, d.min_reverse_speed),
+            reverse_time: non_neg(self.reverse_time, d.reverse_time),
+            turn_tolerance: pos(self.turn_tolerance, d.turn_tolerance),
+            turn_timeout: non_neg(self.turn_timeout, d.turn_timeout),
+            k_heading: pos(self.k_heading, d.k_heading),
+            force_threshold: non_neg(self.force_threshold, d.force_threshold),
+            sector_half_angle: pos(self.sector_half_angle, d.sector_half_angle).min(PI),
+            free_window: non_neg(self.free_window, d.free_window),
+            d_stop: non_neg(self.d_stop, d.d_stop),
+        }
+    }
+}
+
+/// Where the bounce-back layer is in its cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Phase {
+    /// Passing the wrapped planner's commands through; the trigger is armed.
+    Armed,
+    /// Backing away at `v_rev` since tick `start`; then turn to heading `target` (world, rad).
+    /// `obstacle` is the world heading of the obstacle from `at`, where the bounce started.
+    Reversing {
+        start: u64,
+        v_rev: f64,
+        target: f64,
+        obstacle: f64,
+        at: [f64; 2],
+    },
+    /// Turning in place toward heading `target` (world, rad) since tick `start`.
+    Turning {
+        start: u64,
+        target: f64,
+        obstacle: f64,
+        at: [f64; 2],
+    },
+    /// Passing through again since tick `since`; the range trigger waits for d_obs > d_release
+    /// or the cooldown.
+    Disarmed { since: u64 },
+}
+
+/// Seed §4 reactive bounce-back around a wrapped planner `P`.
+#[derive(Debug, Clone)]
+pub struct BounceBack<P: Planner> {
+    inner: P,
+    limits: RobotLimits,
+    config: BounceBackConfig,
+    phase: Phase,
+    prev: Command,
+    bounces: u32,
+    /// The direction (robot frame) the wrapped planner wanted to drive in on the last step but
+    /// could not: the speed cap held it d_stop short of an obstacle.
+    blocked: Option<f64>,
+}
+
+/// Below this speed (m/s) the robot counts as standing: a disk turning in place cannot run into
+/// anything, and −α·v has nothing to reverse, so the range trigger waits.
+const MOVING: f64 = 0.01;
+
+impl<P: Planner> BounceBack<P> {
+    /// Wraps `inner` for a robot with `limits`.
+    pub fn new(inner: P, limits: RobotLimits, config: BounceBackConfig) -> Self {
+        Self {
+            inner,
+            limits: limits.sanitized(),
+            config: config.sanitized(),
+            phase: Phase::Armed,
+            prev: Command::STOP,
+            bounces: 0,
+            blocked: None,
+        }
+    }
+
+    /// Bounce-backs triggered so far.
+    pub fn bounces(&self) -> u32 {
+        self.bounces
+    }
+
+    /// Where the layer is in its cycle.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// The wrapped planner.
+    pub fn inner(&self) -> &P {
+        &self.inner
+    }
+
+    /// The settings in use.
+    pub fn config(&self) -> &BounceBackConfig {
+        &self.config
+    }
+
+    /// Seconds from tick `since` to `tick` at step `dt` (0 if the clock went back).
+    fn elapsed(tick: u64, since: u64, dt: f64) -> f64 {
+        tick.saturating_sub(since) as f64 * dt
+    }
+
+    /// d_obs in the sector around robot-frame direction `dir`, with the nearest beam's angle.
+    fn d_obs(&self, input: &PlannerInput, dir: f64) -> (f64, f64) {
+        input
+            .scan
+            .and_then(|s| {
+                nearest_obstacle(s, self.limits.radius, dir, self.config.sector_half_angle)
+            })
+            .map_or((f64::INFINITY, dir), |n| (n.d_obs, n.angle))
+    }
+
+    /// Starts a bounce-back: reverse away from the obstacle at robot-frame angle
+    /// `obstacle`, at α·|v| (at least the minimum speed), then turn to the freest direction.
+    fn trigger(&mut self, input: &PlannerInput, obstacle: f64, touch: Option<[f64; 2]>) {
+        self.bounces = self.bounces.saturating_add(1);
+        let c = obstacle.cos();
+        let sign = if c > 0.2 {
+            -1.0
+        } else if c < -0.2 {
+            1.0
+        } else if self.prev.v > 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let speed = (self.config.alpha * self.prev.v.abs())
+            .max(self.config.min_reverse_speed)
+            .min(self.limits.max_speed);
+        let free = input
+            .scan
+            .and_then(|s| freest_direction(s, self.config.free_window, obstacle))
+            .or_else(|| touch.map(|f| f[1].atan2(f[0])))
+            .unwrap_or(obstacle + PI);
+        self.phase = Phase::Reversing {
+            start: input.tick,
+            v_rev: sign * speed,
+            target: wrap_angle(input.pose.theta + free),
+            obstacle: wrap_angle(input.pose.theta + obstacle),
+            at: [input.pose.x, input.pose.y],
+        };
+    }
+
+    /// The wrapped planner's command with its speed capped so that it can still stop d_stop
+    /// short of the first obstacle in its path: v ≤ √(2·(a/2)·(free travel − d_stop)).
+    fn pass_through(&mut self, input: &PlannerInput) -> Command {
+        let cmd = self.inner.step(input);
+        let Some(scan) = input.scan else { return cmd };
+        if !(self.limits.max_accel.is_finite() && cmd.v.is_finite()) {
+            return cmd;
+        }
+        let dir = if cmd.v < 0.0 { PI } else { 0.0 };
+        let free = free_travel(scan, dir, self.limits.radius);
+        // Half the deceleration limit: the cap then binds before the limiter does, so the robot
+        // tracks it despite the one-step lag between the scan and the motion.
+        let cap = (self.limits.max_accel * (free - self.config.d_stop).max(0.0)).sqrt();
+        if cmd.v.abs() > MOVING && cap < MOVING {
+            self.blocked = Some(dir);
+        }
+        Command {
+            v: cmd.v.clamp(-cap, cap),
+            ..cmd
+        }
+    }
+}
+
+impl<P: Planner> Planner for BounceBack<P> {
+    fn name(&self) -> &'static str {
+        self.inner.name()
+    }
+
+    fn step(&mut self, input: &PlannerInput) -> Command {
+        if !usable(input) {
+            self.prev = stop_command(&self.limits, &self.prev, input.dt);
+            return self.prev;
+        }
+        let (tick, dt) = (input.tick, input.dt);
+        let blocked = self.blocked.take();
+        let moving = self.prev.v.abs() > MOVING || blocked.is_some();
+        let travel = blocked.unwrap_or(if self.prev.v < 0.0 { PI } else { 0.0 });
+        let (d_ahead, obstacle_angle) = self.d_obs(input, travel);
+        let touch = input
+            .tactile
+            .and_then(|t| contact_force(t, self.config.force_threshold));
+        // The obstacle lies against the force it exerts on the robot.
+        let touch_angle = touch.map(|f| (-f[1]).atan2(-f[0]));
+        let touch_ahead = touch_angle.is_some_and(|a| wrap_angle(a - travel).abs() < FRAC_PI_2);
+
+        // Hysteresis: re-arm above d_release, or after the cooldown.
+        if let Phase::Disarmed { since } = self.phase
+            && (d_ahead > self.config.d_release
+                || Self::elapsed(tick, since, dt) >= self.config.cooldown)
+        {
+            self.phase = Phase::Armed;
+        }
+        // Trigger: when armed, d_obs < d_th while moving, or any touch; when not, a touch
+        // against the travel, or the wrapped planner pressing on toward an obstacle it is held
+        // short of (else it would wait there for the cooldown).
+        match self.phase {
+            Phase::Armed if touch_angle.is_some() => {
+                self.trigger(input, touch_angle.unwrap_or(travel), touch);
+            }
+            Phase::Armed if moving && d_ahead < self.config.d_th => {
+                self.trigger(input, obstacle_angle, touch)
+            }
+            Phase::Disarmed { .. } if touch_ahead => {
+                self.trigger(input, touch_angle.unwrap_or(travel), touch);
+            }
+            Phase::Disarmed { .. } if blocked.is_some() => self.trigger(input, travel, touch),
+            _ => {}
+        }
+        // Reverse for the set time, or until something is in the way behind.
+        if let Phase::Reversing {
+            start,
+            v_rev,
+            target,
+            obstacle,
+            at,
+        } = self.phase
+        {
+            let back = if v_rev < 0.0 { PI } else { 0.0 };
+            let (d_back, _) = self.d_obs(input, back);
+            let touch_back = touch_angle.is_some_and(|a| wrap_angle(a - back).abs() < FRAC_PI_2);
+            if Self::elapsed(tick, start, dt) >= self.config.reverse_time
+                || d_back < self.config.d_stop
+                || touch_back
+            {
+                self.phase = Phase::Turning {
+                    start: tick,
+                    target,
+                    obstacle,
+                    at,
+                };
+            }
+        }
+        // Turn toward the freest direction, then hand back and ask for a new plan.
+        if let Phase::Turning {
+            start,
+            target,
+            obstacle,
+            at,
+        } = self.phase
+            && (wrap_angle(target - input.pose.theta).abs() < self.config.turn_tolerance
+                || Self::elapsed(tick, start, dt) >= self.config.turn_timeout)
+        {
+            self.inner.obstacle_hint(at, obstacle);
+            self.inner.replan();
+            self.phase = Phase::Disarmed { since: tick };
+        }
+
+        let wish = match self.phase {
+            Phase::Reversing { v_rev, .. } => Command {
+                v: v_rev,
+                omega: 0.0,
+                mode: MODE_BOUNCE_BACK,
+            },
+            Phase::Turning { target, .. } => {
+                let e = wrap_angle(target - input.pose.theta);
+                Command {
+                    v: 0.0,
+                    omega: self.config.k_heading * e,
+                    mode: MODE_BOUNCE_BACK,
+                }
+            }
+            Phase::Armed | Phase::Disarmed { .. } => self.pass_through(input),
+        };
+        let (v, omega) = self.limits.limit(&self.prev, wish.v, wish.omega, dt);
+        self.prev = Command {
+            v,
+            omega,
+            mode: wish.mode,
+        };
+        self.prev
+    }
+
+    fn replan(&mut self) {
+        self.inner.replan();
+    }
+
+    fn obstacle_hint(&mut self, at: [f64; 2], heading: f64) {
+        self.inner.obstacle_hint(at, heading);
+    }
+
+    fn bounces(&self) -> u32 {
+        self.bounces
+    }
+
+    fn target(&self) -> Option<[f64; 2]> {
+        self.inner.target()
+    }
+}
+
+#[cfg(test)]
+mod tests;

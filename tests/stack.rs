@@ -1,0 +1,226 @@
+//! The whole stack, started by `mole up` as a user would: lockstep runs, determinism, Ctrl-C,
+//! and a process killed mid-run.
+
+use mole_integration_tests::*;
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use std::time::Duration;
+
+const RUN_TIMEOUT: Duration = Duration::from_secs(240);
+
+fn lockstep_run(test: &str, ticks: u64, seed: u64) -> serde_json::Value {
+    let ticks = ticks.to_string();
+    let seed = seed.to_string();
+    let stack = Stack::start(
+        test,
+        &["--mode", "lockstep", "--ticks", &ticks, "--seed", &seed],
+    );
+    let out = stack.out.clone();
+    let namespace = stack.namespace.clone();
+    let output = stack_wait_keep(stack, &out);
+    assert!(
+        output.0.status.success(),
+        "mole up failed: {}\n{}",
+        String::from_utf8_lossy(&output.0.stderr),
+        output.1
+    );
+    assert!(processes_of(&namespace).is_empty(), "processes left behind");
+    output.2
+}
+
+/// Waits, and reads the summary and logs before the stack's directory is removed.
+fn stack_wait_keep(
+    stack: Stack,
+    out: &std::path::Path,
+) -> (std::process::Output, String, serde_json::Value) {
+    let keep = out.with_extension("kept");
+    let _ = std::fs::remove_dir_all(&keep);
+    let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
+    let logs = logs(&keep);
+    let summary = if keep.join("summary.json").exists() {
+        summary(&keep)
+    } else {
+        serde_json::Value::Null
+    };
+    let _ = std::fs::remove_dir_all(&keep);
+    (output, logs, summary)
+}
+
+fn f64_of(summary: &serde_json::Value, field: &str) -> f64 {
+    summary[field]
+        .as_f64()
+        .unwrap_or_else(|| panic!("summary field `{field}` is not a number: {summary:#}"))
+}
+
+#[test]
+fn lockstep_run_explores_without_penetrating_and_reports_every_field() {
+    let _serial = serial();
+    let before = shm_files();
+    let short = lockstep_run("short", 300, 11);
+    let long = lockstep_run("long", 3000, 11);
+
+    assert_eq!(long["ticks"], 3000, "{long:#}");
+    assert_eq!(long["mode"], "lockstep");
+    assert_eq!(long["exit_reason"], "ticks");
+    assert!(
+        f64_of(&long, "path_length_m") > 2.0,
+        "the robot moved: {long:#}"
+    );
+    assert!(f64_of(&long, "max_penetration_m") <= 0.001, "{long:#}");
+    assert!(
+        f64_of(&long, "coverage") > f64_of(&short, "coverage") + 0.05,
+        "coverage rises: {} then {}",
+        short["coverage"],
+        long["coverage"]
+    );
+    // Contact precision is undefined (null) while the robot has touched nothing, which
+    // bounce-back on lidar usually achieves; the dark-room test checks it.
+    let precision = &long["contact_map_precision"];
+    assert!(precision.is_null() || precision.as_f64().is_some_and(f64::is_finite));
+    for field in [
+        "ticks",
+        "sim_time_s",
+        "wall_time_s",
+        "seed",
+        "path_length_m",
+        "coverage",
+        "map_iou",
+        "localization_rmse_m",
+        "max_penetration_m",
+    ] {
+        let value = f64_of(&long, field);
+        assert!(value.is_finite(), "{field} = {value}");
+    }
+    for field in ["planner", "estimator", "mode", "exit_reason"] {
+        assert!(long[field].is_string(), "{field}: {long:#}");
+    }
+    assert!(long["goal_reached"].is_boolean());
+    assert!(long.get("time_to_goal_s").is_some());
+    for p in ["p50", "p99", "max"] {
+        assert!(
+            long["loop_latency_us"][p]
+                .as_f64()
+                .is_some_and(f64::is_finite),
+            "loop_latency_us.{p}"
+        );
+    }
+    assert!(
+        long["topics"]
+            .as_object()
+            .is_some_and(|t| t.contains_key("world/truth")),
+        "{long:#}"
+    );
+    assert!(long["restarts"].is_object());
+    assert_eq!(shm_files(), before, "shared memory left behind");
+}
+
+#[test]
+fn two_lockstep_runs_with_the_same_seed_are_identical() {
+    let _serial = serial();
+    let first = lockstep_run("det-a", 1500, 42);
+    let second = lockstep_run("det-b", 1500, 42);
+    let other = lockstep_run("det-c", 1500, 43);
+    // Wall time, latencies and wall-clock rates differ from run to run; nothing else may.
+    let strip = |s: &serde_json::Value| {
+        let mut s = s.clone();
+        if let Some(o) = s.as_object_mut() {
+            for key in [
+                "wall_time_s",
+                "launcher_wall_time_s",
+                "loop_latency_us",
+                "estimator_update_us",
+                "topics",
+            ] {
+                o.remove(key);
+            }
+        }
+        s
+    };
+    assert_eq!(strip(&first), strip(&second));
+    assert_eq!(first["grid_hash"], second["grid_hash"]);
+    assert_eq!(first["contact_hash"], second["contact_hash"]);
+    assert_ne!(
+        first["grid_hash"], other["grid_hash"],
+        "another seed gives another run"
+    );
+}
+
+#[test]
+fn ctrl_c_stops_everything_and_leaves_nothing_behind() {
+    let _serial = serial();
+    let before = shm_files();
+    let stack = Stack::start("ctrlc", &["--mode", "realtime", "--ticks", "100000"]);
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(1500));
+    let namespace = stack.namespace.clone();
+    let out = stack.out.clone();
+    kill(Pid::from_raw(stack.pid() as i32), Signal::SIGINT).expect("send SIGINT");
+    let (output, logs, summary) = stack_wait_keep(stack, &out);
+    assert!(
+        output.status.success(),
+        "exit status {:?}\n{logs}",
+        output.status
+    );
+    assert!(
+        processes_of(&namespace).is_empty(),
+        "a child outlived the launcher"
+    );
+    assert_eq!(summary["exit_reason"], "interrupted", "{summary:#}");
+    assert_eq!(shm_files(), before, "shared memory left behind");
+}
+
+#[test]
+fn a_killed_process_is_restarted_and_the_run_completes() {
+    let _serial = serial();
+    let stack = Stack::start("restart", &["--mode", "realtime", "--ticks", "600"]);
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(1000));
+    let victim = processes_of(&stack.namespace)
+        .into_iter()
+        .find(|pid| {
+            std::fs::read_to_string(format!("/proc/{pid}/comm"))
+                .is_ok_and(|c| c.trim() == "mole-sensing")
+        })
+        .expect("a running mole-sensing");
+    kill(Pid::from_raw(victim as i32), Signal::SIGKILL).expect("SIGKILL sensing");
+    let out = stack.out.clone();
+    let (output, logs, summary) = stack_wait_keep(stack, &out);
+    assert!(output.status.success(), "{logs}");
+    assert_eq!(summary["restarts"]["sensing"], 1, "{summary:#}");
+    assert_eq!(summary["exit_reason"], "ticks");
+    assert_eq!(summary["ticks"], 600);
+}
+
+#[test]
+fn in_the_dark_room_touch_alone_builds_the_contact_grid() {
+    let _serial = serial();
+    let stack = Stack::start(
+        "dark",
+        &[
+            "--mode",
+            "lockstep",
+            "--ticks",
+            "6000",
+            "--seed",
+            "1",
+            "--scenario",
+            "scenarios/dark_room.toml",
+        ],
+    );
+    let out = stack.out.clone();
+    let (output, logs, summary) = stack_wait_keep(stack, &out);
+    assert!(output.status.success(), "{logs}");
+    assert!(
+        summary["contact_events"].as_u64().is_some_and(|n| n > 0),
+        "the robot touched something: {summary:#}"
+    );
+    let precision = f64_of(&summary, "contact_map_precision");
+    assert!(
+        precision >= 0.9,
+        "contact cells lie on true obstacles: {precision}"
+    );
+    assert!(
+        f64_of(&summary, "coverage") > 0.02,
+        "the footprint alone explores: {summary:#}"
+    );
+}

@@ -1,0 +1,282 @@
+//! What every integration test needs: the built binaries, a unique namespace, a `mole up` that
+//! is killed with all its children whatever happens, and a check that nothing is left behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+/// Stacks share two cores and /dev/shm: one at a time, so leftovers can be counted exactly.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+/// Holds the one-stack-at-a-time lock for a test.
+pub fn serial() -> MutexGuard<'static, ()> {
+    SERIAL
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The workspace root.
+pub fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The directory of the built binaries (the test executable lives in its `deps/`).
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>")
+        .to_path_buf();
+    for name in [
+        "mole",
+        "mole-world",
+        "mole-sensing",
+        "mole-localization",
+        "mole-mapping",
+        "mole-planning",
+        "mole-monitor",
+    ] {
+        assert!(
+            dir.join(name).exists(),
+            "{} is missing: run the README's test command (it builds every binary first)",
+            dir.join(name).display()
+        );
+    }
+    dir
+}
+
+/// A namespace no other test or stack uses.
+pub fn unique_namespace(test: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.subsec_nanos())
+        .unwrap_or(0);
+    format!("t-{test}-{}-{nanos}", std::process::id())
+}
+
+/// iceoryx2's files in /dev/shm, by name.
+pub fn shm_files() -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir("/dev/shm")
+        .map(|entries| {
+            entries
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.starts_with("iox2_"))
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    names
+}
+
+/// PIDs of live processes started for `namespace` (their environment names it).
+pub fn processes_of(namespace: &str) -> Vec<u32> {
+    let needle = format!("MOLE_NAMESPACE={namespace}");
+    let mut pids = Vec::new();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return pids;
+    };
+    for entry in entries.flatten() {
+        let Some(pid) = entry
+            .file_name()
+            .to_str()
+            .and_then(|s| s.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let Ok(environ) = std::fs::read(entry.path().join("environ")) else {
+            continue;
+        };
+        let is_zombie = std::fs::read_to_string(entry.path().join("stat"))
+            .map(|s| {
+                s.rsplit(')')
+                    .next()
+                    .is_some_and(|rest| rest.trim_start().starts_with('Z'))
+            })
+            .unwrap_or(false);
+        if !is_zombie && environ.split(|b| *b == 0).any(|kv| kv == needle.as_bytes()) {
+            pids.push(pid);
+        }
+    }
+    pids
+}
+
+/// A running `mole up`; on drop (a failed test included) it and every process of its namespace
+/// are killed.
+pub struct Stack {
+    pub namespace: String,
+    pub out: PathBuf,
+    child: Option<Child>,
+}
+
+impl Stack {
+    /// Starts `mole up` with `args` in a fresh namespace and output directory.
+    pub fn start(test: &str, args: &[&str]) -> Stack {
+        let namespace = unique_namespace(test);
+        let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+        let _ = std::fs::remove_dir_all(&out);
+        let child = mole_command(&namespace, &out, args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start mole up");
+        Stack {
+            namespace,
+            out,
+            child: Some(child),
+        }
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.as_ref().map_or(0, Child::id)
+    }
+
+    /// Waits for `mole up` to exit (or kills it after `timeout`).
+    pub fn wait(mut self, timeout: Duration) -> Output {
+        self.wait_inner(timeout)
+    }
+
+    fn wait_inner(&mut self, timeout: Duration) -> Output {
+        let mut child = self.child.take().expect("running");
+        let deadline = Instant::now() + timeout;
+        while child.try_wait().ok().flatten().is_none() {
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                let output = child.wait_with_output().expect("reap");
+                panic!(
+                    "mole up did not finish within {timeout:?}\nstdout:\n{}\nstderr:\n{}\nlogs:\n{}",
+                    String::from_utf8_lossy(&output.stdout),
+                    String::from_utf8_lossy(&output.stderr),
+                    logs(&self.out)
+                );
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        child.wait_with_output().expect("collect output")
+    }
+
+    /// Waits like [`Stack::wait`], then copies the output directory to `keep` before the stack
+    /// (and its directory) is dropped.
+    pub fn wait_and_copy(mut self, keep: &Path, timeout: Duration) -> Output {
+        let output = self.wait_inner(timeout);
+        copy_dir(&self.out, keep);
+        output
+    }
+
+    /// Waits until a role's log contains `needle`.
+    pub fn wait_for_log(&self, role: &str, needle: &str, timeout: Duration) {
+        let path = self.out.join("logs").join(format!("{role}.log"));
+        let deadline = Instant::now() + timeout;
+        loop {
+            if std::fs::read_to_string(&path).is_ok_and(|t| t.contains(needle)) {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{} never said `{needle}`:\n{}",
+                path.display(),
+                logs(&self.out)
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for Stack {
+    fn drop(&mut self) {
+        use nix::sys::signal::{Signal, kill};
+        use nix::unistd::Pid;
+        if let Some(mut child) = self.child.take() {
+            // Ask nicely first (the launcher stops its children in order), then insist.
+            let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGINT);
+            let deadline = Instant::now() + Duration::from_secs(15);
+            while child.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+        let leftovers = processes_of(&self.namespace);
+        for pid in &leftovers {
+            let _ = kill(Pid::from_raw(*pid as i32), Signal::SIGKILL);
+        }
+        if !leftovers.is_empty() {
+            std::thread::sleep(Duration::from_millis(200));
+            mole_runtime::cleanup_dead_nodes();
+        }
+        let _ = std::fs::remove_dir_all(&self.out);
+    }
+}
+
+/// `mole up` for a namespace and output directory, run from the workspace root.
+pub fn mole_command(namespace: &str, out: &Path, args: &[&str]) -> Command {
+    let mut command = Command::new(bin_dir().join("mole"));
+    command
+        .current_dir(workspace())
+        .env("MOLE_NAMESPACE", namespace)
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .arg("up")
+        .args(args)
+        .args(["--namespace", namespace, "--out"])
+        .arg(out)
+        .arg("--quiet")
+        .stdin(Stdio::null());
+    command
+}
+
+/// Runs `mole` with raw arguments (for bad-input tests) and returns its output.
+pub fn run_mole(args: &[&str]) -> Output {
+    Command::new(bin_dir().join("mole"))
+        .current_dir(workspace())
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .expect("run mole")
+}
+
+/// Every process log of a run, for failure messages.
+pub fn logs(out: &Path) -> String {
+    let mut text = String::new();
+    if let Ok(entries) = std::fs::read_dir(out.join("logs")) {
+        for entry in entries.flatten() {
+            let content = std::fs::read_to_string(entry.path()).unwrap_or_default();
+            let tail: String = content
+                .lines()
+                .rev()
+                .take(15)
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+                .collect::<Vec<_>>()
+                .join("\n");
+            text.push_str(&format!("--- {} ---\n{tail}\n", entry.path().display()));
+        }
+    }
+    text
+}
+
+/// Reads a run's summary.json.
+pub fn summary(out: &Path) -> serde_json::Value {
+    let path = out.join("summary.json");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("no summary at {}: {e}\n{}", path.display(), logs(out)));
+    serde_json::from_str(&text).expect("summary.json is JSON")
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    let _ = std::fs::create_dir_all(to.join("logs"));
+    for sub in [Path::new(""), Path::new("logs")] {
+        if let Ok(entries) = std::fs::read_dir(from.join(sub)) {
+            for entry in entries.flatten() {
+                if entry.path().is_file() {
+                    let _ = std::fs::copy(entry.path(), to.join(sub).join(entry.file_name()));
+                }
+            }
+        }
+    }
+}
