@@ -34,7 +34,10 @@ impl<M> core::fmt::Debug for Topic<M> {
 }
 
 impl<M> Topic<M> {
-    const fn new(name: &'static str) -> Self {
+    /// A topic with the default service settings (history 0, buffer 16, 2 publishers, 8
+    /// subscribers). The stack's topics are the constants below; tools (benchmarks) may define
+    /// their own.
+    pub const fn new(name: &'static str) -> Self {
         Self {
             name,
             history: 0,
@@ -44,16 +47,20 @@ impl<M> Topic<M> {
             _message: PhantomData,
         }
     }
-    const fn history(mut self, history: usize) -> Self {
+    pub const fn history(mut self, history: usize) -> Self {
         self.history = history;
         self
     }
-    const fn buffer(mut self, buffer: usize) -> Self {
+    pub const fn buffer(mut self, buffer: usize) -> Self {
         self.buffer = buffer;
         self
     }
-    const fn max_publishers(mut self, n: usize) -> Self {
+    pub const fn max_publishers(mut self, n: usize) -> Self {
         self.max_publishers = n;
+        self
+    }
+    pub const fn max_subscribers(mut self, n: usize) -> Self {
+        self.max_subscribers = n;
         self
     }
 }
