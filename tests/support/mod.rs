@@ -56,17 +56,20 @@ pub fn unique_namespace(test: &str) -> String {
     format!("t-{test}-{}-{nanos}", std::process::id())
 }
 
-/// iceoryx2's files in /dev/shm, by name.
+/// iceoryx2's files: shared memory in /dev/shm and its node and service records in
+/// /tmp/iceoryx2, by path.
 pub fn shm_files() -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir("/dev/shm")
-        .map(|entries| {
-            entries
-                .flatten()
-                .map(|e| e.file_name().to_string_lossy().into_owned())
-                .filter(|n| n.starts_with("iox2_"))
-                .collect()
-        })
-        .unwrap_or_default();
+    let mut names = Vec::new();
+    for dir in ["/dev/shm", "/tmp/iceoryx2/nodes", "/tmp/iceoryx2/services"] {
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for entry in entries.flatten() {
+                let name = entry.file_name().to_string_lossy().into_owned();
+                if dir != "/dev/shm" || name.starts_with("iox2_") {
+                    names.push(format!("{dir}/{name}"));
+                }
+            }
+        }
+    }
     names.sort();
     names
 }
