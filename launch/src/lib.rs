@@ -4,11 +4,15 @@
 //! [`load_launch_file`] → [`apply_swaps`] → [`start_order`] → [`Supervisor::spawn`] each process
 //! → [`Supervisor::poll`] while running → [`Supervisor::shutdown`] in [`stop_order`].
 
+pub mod bench_stack;
 mod error;
 pub mod launch_file;
 pub mod order;
+pub mod stats;
 pub mod supervisor;
 pub mod swap;
+pub mod top;
+pub mod up;
 
 pub use error::LaunchError;
 pub use launch_file::{

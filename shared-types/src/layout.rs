@@ -99,6 +99,7 @@ pub fn all() -> Vec<TypeLayout> {
             header, process, pid, n_topics, cpu_ns, max_rss_bytes, steps, topics),
         layout!(RunStatus, type_name::<RunStatus>();
             header, coverage, loop_p50_us, loop_p99_us, max_penetration_m, rmse_m, finished),
+        layout!(Processes, type_name::<Processes>(); header, n_processes, _pad, processes),
         layout!(RobotSpec, type_name::<RobotSpec>(); radius, max_speed, max_omega, max_accel, max_alpha),
         layout!(SensorSpec, type_name::<SensorSpec>();
             lidar_beams, tactile_sensors, lidar_range_max, lidar_fov, lidar_range_std,
@@ -113,6 +114,7 @@ pub fn all() -> Vec<TypeLayout> {
         layout!(TopicStats, type_name::<TopicStats>();
             topic, direction, _pad, count, dropped, invalid, rate_hz, latency_p50_us,
             latency_p99_us, latency_max_us),
+        layout!(ProcessStatus, type_name::<ProcessStatus>(); role, pid, state, restarts, _pad),
     ]
 }
 
@@ -171,6 +173,8 @@ const _: () = {
     assert!(size_of::<TopicStats>() == 80);
     assert!(size_of::<Stats>() == 96 + 80 * MAX_TOPIC_STATS);
     assert!(size_of::<RunStatus>() == 56);
+    assert!(size_of::<ProcessStatus>() == 48);
+    assert!(size_of::<Processes>() == 40 + 48 * MAX_PROCESSES);
     assert!(offset_of!(WorldMap, header) == 0);
     assert!(offset_of!(Grid, cells) == 72);
     assert!(offset_of!(Scan, ranges) == 48);

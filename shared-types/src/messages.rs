@@ -887,6 +887,63 @@ impl Message for Stats {
     }
 }
 
+/// Most processes the launcher reports on `stack/processes`.
+pub const MAX_PROCESSES: usize = 16;
+
+/// `ProcessStatus::state` codes.
+pub const PROCESS_STARTING: u32 = 0;
+pub const PROCESS_RUNNING: u32 = 1;
+pub const PROCESS_RESTARTING: u32 = 2;
+pub const PROCESS_EXITED: u32 = 3;
+pub const PROCESS_FAILED: u32 = 4;
+
+/// One supervised process, as the launcher sees it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.ProcessStatus.v1")]
+pub struct ProcessStatus {
+    /// Role name, NUL-padded.
+    pub role: [u8; NAME_LEN],
+    pub pid: u32,
+    pub state: u32,
+    pub restarts: u32,
+    pub _pad: u32,
+}
+
+/// `stack/processes`: the launcher's view of every process, once a second.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Processes.v1")]
+pub struct Processes {
+    pub header: Header,
+    pub n_processes: u32,
+    pub _pad: u32,
+    pub processes: [ProcessStatus; MAX_PROCESSES],
+}
+
+impl Processes {
+    pub fn processes(&self) -> &[ProcessStatus] {
+        &self.processes[..(self.n_processes as usize).min(MAX_PROCESSES)]
+    }
+}
+
+impl Message for Processes {
+    const TYPE_NAME: &'static str = "mole.Processes.v1";
+    fn header(&self) -> &Header {
+        &self.header
+    }
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+    fn validate(&self) -> Result<(), Invalid> {
+        within("n_processes", self.n_processes, MAX_PROCESSES)?;
+        if self.processes().iter().any(|p| p.state > PROCESS_FAILED) {
+            return Err(Invalid::UnknownCode("processes.state"));
+        }
+        Ok(())
+    }
+}
+
 /// `monitor/status`: the monitor's live view of the run, for progress bars and `mole top`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]

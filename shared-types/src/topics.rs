@@ -81,6 +81,7 @@ pub const PLANNING_STATUS: Topic<PlanStatus> = Topic::new("planning/status").buf
 pub const STACK_TICK: Topic<Tick> = Topic::new("stack/tick");
 pub const STACK_STATS: Topic<Stats> = Topic::new("stack/stats").buffer(64).max_publishers(32);
 pub const MONITOR_STATUS: Topic<RunStatus> = Topic::new("monitor/status").history(1).buffer(4);
+pub const STACK_PROCESSES: Topic<Processes> = Topic::new("stack/processes").history(1).buffer(4);
 
 /// Every publish-subscribe topic with its message's type name, in table order.
 pub const ALL: &[(&str, &str)] = &[
@@ -100,6 +101,7 @@ pub const ALL: &[(&str, &str)] = &[
     (STACK_TICK.name, "mole.Tick.v1"),
     (STACK_STATS.name, "mole.Stats.v1"),
     (MONITOR_STATUS.name, "mole.RunStatus.v1"),
+    (STACK_PROCESSES.name, "mole.Processes.v1"),
 ];
 
 /// The full service name of a topic in a namespace.
@@ -135,6 +137,7 @@ mod tests {
             type_name_of(STACK_TICK),
             type_name_of(STACK_STATS),
             type_name_of(MONITOR_STATUS),
+            type_name_of(STACK_PROCESSES),
         ];
         let table: Vec<&str> = ALL.iter().map(|(_, t)| *t).collect();
         assert_eq!(table, from_types);

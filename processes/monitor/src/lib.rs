@@ -513,6 +513,11 @@ impl Monitor {
     }
 
     /// Loop latency quantile (µs), `None` before any command latency.
+    /// The loop latency's distribution, `[upper bound (µs), count]` per doubling bucket.
+    pub fn loop_latency_histogram_us(&self) -> Vec<[f64; 2]> {
+        histogram_us(&self.loop_latency_ns)
+    }
+
     pub fn loop_latency_us(&self, quantile: f64) -> Option<f64> {
         quantile_us(&self.loop_latency_ns, quantile)
     }
@@ -585,6 +590,7 @@ impl Monitor {
                 p50: self.loop_latency_us(0.5),
                 p99: self.loop_latency_us(0.99),
                 max: self.loop_latency_us(1.0),
+                histogram: histogram_us(&self.loop_latency_ns),
             },
             topics: self.topic_summaries(),
             restarts: meta.restarts.clone(),
@@ -721,3 +727,18 @@ impl Monitor {
 
 #[cfg(test)]
 mod tests;
+
+/// A nanosecond histogram as `[upper bound (µs), count]` per doubling bucket from 1 µs.
+fn histogram_us(h: &Histogram<u64>) -> Vec<[f64; 2]> {
+    if h.is_empty() {
+        return Vec::new();
+    }
+    h.iter_log(1000, 2.0)
+        .map(|v| {
+            [
+                v.value_iterated_to() as f64 / 1000.0,
+                v.count_since_last_iteration() as f64,
+            ]
+        })
+        .collect()
+}

@@ -21,11 +21,14 @@ pub struct RunMeta {
 }
 
 /// Loop latency over the run (µs); `null` when no command latency was seen.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct LatencyUs {
     pub p50: Option<f64>,
     pub p99: Option<f64>,
     pub max: Option<f64>,
+    /// The distribution: `[upper bound (µs), count]` per doubling bucket from 1 µs.
+    #[serde(default)]
+    pub histogram: Vec<[f64; 2]>,
 }
 
 /// Estimator update time per step (µs); `null` when no pose was seen.
