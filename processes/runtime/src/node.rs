@@ -58,8 +58,10 @@ pub fn now_ns() -> u64 {
     }
 }
 
-/// Logs to stderr through `tracing`, filtered by RUST_LOG (default `info`).
+/// Logs to stderr through `tracing`, filtered by RUST_LOG (default `info`); iceoryx2's own log
+/// shows errors only unless IOX2_LOG_LEVEL says otherwise.
 pub fn init_tracing(role: &str) {
+    set_log_level_from_env_or(LogLevel::Error);
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
