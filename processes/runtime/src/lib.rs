@@ -12,11 +12,13 @@
 //! - Per-topic statistics (rate, dropped, invalid, latency from `origin_ns`) are published on
 //!   `stack/stats` once a second.
 
+mod alloc_counter;
 mod clock;
 mod node;
 mod ports;
 mod stats;
 
+pub use alloc_counter::{CountingAllocator, allocations_during};
 pub use clock::{ClockMode, StepGate};
 pub use node::{
     Attachment, CommonArgs, Context, RuntimeError, WaitSet, Wake, cleanup_dead_nodes, init_tracing,
