@@ -22,7 +22,7 @@ pub use alloc_counter::{CountingAllocator, allocations_during};
 pub use clock::{ClockMode, StepGate};
 pub use node::{
     Attachment, CommonArgs, Context, RuntimeError, WaitSet, Wake, cleanup_dead_nodes, init_tracing,
-    live_nodes_in_namespace, now_ns,
+    list_topics, live_nodes_in_namespace, now_ns,
 };
 pub use ports::{Publisher, Subscriber, Waker};
 pub use stats::StatsRegistry;

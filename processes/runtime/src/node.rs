@@ -117,6 +117,35 @@ type PubSubFactory<M> =
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, M, ()>;
 type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
 
+/// The publish-subscribe services of a namespace as iceoryx2 lists them: `(topic, payload type
+/// name)`, sorted. Any tool that lists iceoryx2 services (`iox2 service list`) sees the same.
+pub fn list_topics(namespace: &str) -> Vec<(String, String)> {
+    use iceoryx2::service::Service as _;
+    use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
+    let prefix = format!("mole/{namespace}/");
+    let mut topics = Vec::new();
+    let result = ipc::Service::list(Config::global_config(), |details| {
+        let name = details.static_details.name().as_str();
+        if let Some(topic) = name.strip_prefix(&prefix)
+            && let MessagingPattern::PublishSubscribe(config) =
+                details.static_details.messaging_pattern()
+        {
+            let payload = config
+                .message_type_details()
+                .payload
+                .type_name()
+                .to_string();
+            topics.push((topic.to_string(), payload));
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = result {
+        tracing::warn!("cannot list services: {e:?}");
+    }
+    topics.sort();
+    topics
+}
+
 /// One process's link to the stack: its node in the namespace, its statistics, its shutdown flag.
 pub struct Context {
     node: Node<ipc::Service>,
@@ -237,7 +266,17 @@ impl Context {
             .max_subscribers(topic.max_subscribers)
             .enable_safe_overflow(!lockstep)
             .open_or_create()
-            .map_err(|e| failed(describe_open_error(&format!("{e:?}"), M::TYPE_NAME)))?;
+            .map_err(|e| {
+                let theirs = list_topics(&self.namespace)
+                    .into_iter()
+                    .find(|(t, _)| t == topic.name)
+                    .map(|(_, type_name)| type_name);
+                failed(describe_open_error(
+                    &format!("{e:?}"),
+                    M::TYPE_NAME,
+                    theirs.as_deref(),
+                ))
+            })?;
         let event = self
             .node
             .service_builder(&name)
@@ -377,11 +416,18 @@ fn resource_usage() -> (u64, u64) {
 }
 
 /// Turns iceoryx2's open errors into a sentence; a type mismatch names both sides.
-fn describe_open_error(debug: &str, ours: &str) -> String {
+fn describe_open_error(debug: &str, ours: &str, theirs: Option<&str>) -> String {
     if debug.contains("IncompatibleTypes") {
-        format!(
-            "another process uses a different message type on this topic (this process expects `{ours}`)"
-        )
+        match theirs {
+            Some(theirs) => format!(
+                "the stack carries `{theirs}` on this topic, this process speaks `{ours}`: their \
+                 layouts differ, rebuild one side against the other's shared-types"
+            ),
+            None => format!(
+                "another process uses a different message type on this topic (this process \
+                 speaks `{ours}`)"
+            ),
+        }
     } else if debug.contains("VersionMismatch") || debug.contains("IncompatibleVersion") {
         "the service was created by a process built against another iceoryx2 version".to_string()
     } else {

@@ -121,3 +121,43 @@ fn late_subscribers_get_the_world_map_from_history() {
     assert!(map_sub.update());
     assert_eq!(map_sub.latest().unwrap().arena_width, 4.0);
 }
+
+#[test]
+fn topics_are_discoverable_with_their_type_names() {
+    let args = args("discover", ClockMode::Realtime);
+    let ctx = context("world", &args);
+    let _truth = ctx.publisher(topics::WORLD_TRUTH).unwrap();
+    let _scan = ctx.subscriber(topics::SENSING_SCAN).unwrap();
+    let listed = mole_runtime::list_topics(&args.namespace);
+    assert!(
+        listed.contains(&("world/truth".to_string(), "mole.Truth.v1".to_string())),
+        "{listed:?}"
+    );
+    assert!(
+        listed.contains(&("sensing/scan".to_string(), "mole.Scan.v1".to_string())),
+        "{listed:?}"
+    );
+    assert!(
+        listed.iter().any(|(t, _)| t == "stack/stats"),
+        "every context publishes stats"
+    );
+}
+
+#[test]
+fn a_different_layout_on_a_topic_is_refused_naming_both_types() {
+    let args = args("mismatch", ClockMode::Realtime);
+    let ctx = context("planning", &args);
+    let _cmd = ctx.publisher(topics::PLANNING_CMD).unwrap();
+    let other = context("rogue", &args);
+    let wrong: mole_types::Topic<mole_types::Odom> = mole_types::Topic::new("planning/cmd");
+    let Err(err) = other.subscriber(wrong) else {
+        panic!("a subscriber of the wrong type was accepted")
+    };
+    let text = err.to_string();
+    assert!(
+        text.contains("planning/cmd")
+            && text.contains("mole.Cmd.v1")
+            && text.contains("mole.Odom.v1"),
+        "{text}"
+    );
+}
