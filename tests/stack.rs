@@ -153,6 +153,20 @@ fn ctrl_c_stops_everything_and_leaves_nothing_behind() {
     stack.wait_for_log("world", "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(1500));
     let namespace = stack.namespace.clone();
+    // mole top attaches to the running stack and shows every process and topic.
+    let top = run_mole(&["top", "--namespace", &namespace, "--once"]);
+    let screen = String::from_utf8_lossy(&top.stdout);
+    assert!(
+        top.status.success(),
+        "{}",
+        String::from_utf8_lossy(&top.stderr)
+    );
+    for needle in ["world/truth", "sensing", "planning/cmd", "running"] {
+        assert!(
+            screen.contains(needle),
+            "mole top shows {needle}:\n{screen}"
+        );
+    }
     let out = stack.out.clone();
     kill(Pid::from_raw(stack.pid() as i32), Signal::SIGINT).expect("send SIGINT");
     let (output, logs, summary) = stack_wait_keep(stack, &out);
@@ -223,4 +237,21 @@ fn in_the_dark_room_touch_alone_builds_the_contact_grid() {
         f64_of(&summary, "coverage") > 0.02,
         "the footprint alone explores: {summary:#}"
     );
+}
+
+#[test]
+fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
+    let _serial = serial();
+    let args = ["--mode", "lockstep", "--ticks", "1500", "--seed", "5"];
+    let a = Stack::start("robot-a", &args);
+    let b = Stack::start("robot-b", &args);
+    let (out_a, out_b) = (a.out.clone(), b.out.clone());
+    let (output_a, logs_a, summary_a) = stack_wait_keep(a, &out_a);
+    let (output_b, logs_b, summary_b) = stack_wait_keep(b, &out_b);
+    assert!(output_a.status.success(), "{logs_a}");
+    assert!(output_b.status.success(), "{logs_b}");
+    // Same seed, separate namespaces: each run is exactly what it would be alone.
+    assert_eq!(summary_a["grid_hash"], summary_b["grid_hash"]);
+    assert_eq!(summary_a["path_length_m"], summary_b["path_length_m"]);
+    assert_eq!(summary_a["topics"]["world/truth"]["dropped"], 0);
 }
