@@ -8,6 +8,9 @@ use mole_runtime::{CommonArgs, Context, StepGate, Wake, now_ns};
 use mole_types::topics;
 use std::process::ExitCode;
 
+/// Publish the particle set every this many steps.
+const PARTICLES_EVERY: u64 = 10;
+
 #[derive(Debug, Parser)]
 #[command(name = "mole-localization", about = "mole's pose estimators (seed §6)")]
 struct Args {
@@ -27,13 +30,6 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    if kind != EstimatorKind::Ekf {
-        eprintln!(
-            "error: --estimator: `{}` is not implemented yet; available: ekf",
-            kind.name()
-        );
-        return ExitCode::from(2);
-    }
     match run(&args, kind) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -50,6 +46,7 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
     let mut beacons_sub = ctx.subscriber(topics::SENSING_BEACONS)?;
     let mut fix_sub = ctx.subscriber(topics::SENSING_FIX)?;
     let mut pose_pub = ctx.publisher(topics::LOCALIZATION_POSE)?;
+    let mut particles_pub = ctx.publisher(topics::LOCALIZATION_PARTICLES)?;
     let waitset = ctx.waitset()?;
     let wakers = [
         map_sub.waker(),
@@ -102,6 +99,15 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
             estimator.write_pose(pose);
             pose.update_ns = update_ns;
         })?;
+        // The particle set (PF only), written straight into shared memory; every 10th step is
+        // plenty for a picture or a viewer, and keeps 256 KiB per step off the bus.
+        if kind == EstimatorKind::Pf && tick % PARTICLES_EVERY == 0 {
+            particles_pub.publish(tick, odom.header.origin_ns, |p| {
+                if !estimator.write_particles(p) {
+                    p.n_particles = 0;
+                }
+            })?;
+        }
         ctx.count_step();
     }
 }

@@ -11,6 +11,26 @@ use nalgebra::{Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
 /// Below this |a| the sinc terms use their Taylor series (error < 1e-20, no cancellation).
 const SINC_SERIES_BELOW: f64 = 1e-3;
 
+/// Wraps an angle to (−π, π] with at most two ±2π steps (no fmod, no libm call), falling back
+/// to [`wrap_angle`] when |a| ≥ 5π; for the per-particle and per-cell hot loops.
+#[inline]
+pub(crate) fn wrap_near(a: f64) -> f64 {
+    use core::f64::consts::{PI, TAU};
+    let mut r = a;
+    if r > PI {
+        r -= TAU;
+        if r > PI {
+            r -= TAU;
+        }
+    } else if r <= -PI {
+        r += TAU;
+        if r <= -PI {
+            r += TAU;
+        }
+    }
+    if r > -PI && r <= PI { r } else { wrap_angle(a) }
+}
+
 /// sin(a)/a, with the limit 1 at a = 0.
 #[inline]
 pub(crate) fn sinc(a: f64) -> f64 {
@@ -253,6 +273,18 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn wrap_near_agrees_with_wrap_angle() {
+        for i in -2000..=2000 {
+            let a = i as f64 * 0.01 + 0.003;
+            assert!((wrap_near(a) - wrap_angle(a)).abs() < 1e-12, "{a}");
+        }
+        assert_eq!(wrap_near(PI), PI);
+        assert_eq!(wrap_near(-PI), PI);
+        assert!(wrap_near(f64::NAN).is_nan());
+        assert!((wrap_near(1e6) - wrap_angle(1e6)).abs() < 1e-9);
     }
 
     #[test]
