@@ -4,6 +4,7 @@
 //! [`load_launch_file`] → [`apply_swaps`] → [`start_order`] → [`Supervisor::spawn`] each process
 //! → [`Supervisor::poll`] while running → [`Supervisor::shutdown`] in [`stop_order`].
 
+pub mod bench_ipc;
 pub mod bench_stack;
 mod error;
 pub mod launch_file;

@@ -1,6 +1,7 @@
 //! `mole`: starts the stack with one command, supervises it, and measures it.
 
 use clap::{Parser, Subcommand};
+use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
 use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
 use mole_launch::top::{TopArgs, top};
 use mole_launch::up::{UpArgs, up};
@@ -30,6 +31,9 @@ enum Command {
 
 #[derive(Debug, Subcommand)]
 enum BenchCommand {
+    /// Latency, throughput, fan-out and a five-hop chain: the runtime, raw iceoryx2, a Unix
+    /// socket and TCP, payloads from 64 B to 4 MiB.
+    Ipc(BenchIpcArgs),
     /// Run the full stack and report steps/s, loop latency, per-hop latency, CPU and memory.
     Stack(BenchStackArgs),
 }
@@ -40,6 +44,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Up(args) => up(&args).map(drop),
         Command::Top(args) => top(&args),
+        Command::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
         Command::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),
     };
     match result {

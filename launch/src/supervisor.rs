@@ -214,7 +214,11 @@ impl Supervisor {
                     expected,
                 });
                 let policy = slot.spec.restart;
-                if !expected && wants_restart(policy.policy, status) {
+                if !expected && status == ExitStatus::Code(EXIT_BAD_INPUT) {
+                    events.push(SupervisorEvent::GaveUp {
+                        role: slot.spec.role.clone(),
+                    });
+                } else if !expected && wants_restart(policy.policy, status) {
                     if now.duration_since(slot.started)
                         >= Duration::from_millis(policy.stable_after_ms)
                     {
@@ -376,7 +380,14 @@ impl Drop for Supervisor {
 }
 
 /// Whether a policy restarts after this exit.
+/// Exit code 2 is every mole process's "bad input" (a malformed scenario, an unknown planner):
+/// running it again cannot help, so no policy restarts it.
+pub const EXIT_BAD_INPUT: i32 = 2;
+
 fn wants_restart(when: RestartWhen, status: ExitStatus) -> bool {
+    if status == ExitStatus::Code(EXIT_BAD_INPUT) {
+        return false;
+    }
     match when {
         RestartWhen::Never => false,
         RestartWhen::OnFailure => !status.success(),

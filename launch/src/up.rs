@@ -1,9 +1,11 @@
 //! `mole up`: start the stack, supervise it, wait for the end, and complete the summary.
 
 use crate::stats::StatsCollector;
+use crate::supervisor::EXIT_BAD_INPUT;
 use crate::{
-    ChildSpec, DEFAULT_LAUNCH_FILE, LaunchFile, Mode, StackOverrides, Supervisor, SupervisorEvent,
-    apply_swaps, load_launch_file, parse_swap, resolve_program, start_order, stop_order,
+    ChildSpec, DEFAULT_LAUNCH_FILE, ExitStatus, LaunchFile, Mode, StackOverrides, Supervisor,
+    SupervisorEvent, apply_swaps, load_launch_file, parse_swap, resolve_program, start_order,
+    stop_order,
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -44,6 +46,12 @@ pub struct UpArgs {
     /// Simulated seconds to run.
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Goal X,Y (m) for the goal-seeking planners (apf, dwa), instead of the scenario's.
+    #[arg(long, value_name = "X,Y", value_parser = mole_runtime::parse_point)]
+    pub goal: Option<(f64, f64)>,
+    /// Local planner that follows frontier paths: dwa or apf.
+    #[arg(long, value_name = "dwa|apf")]
+    pub local_planner: Option<String>,
     /// Seed for every random number of the run.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -320,10 +328,20 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
                 }
                 SupervisorEvent::GaveUp { role } => {
                     gave_up.insert(role.clone());
-                    failure = Some(format!(
-                        "`{role}` kept failing and its restart policy gave up (see {})",
-                        args.out.join("logs").join(format!("{role}.log")).display()
-                    ));
+                    let log = args.out.join("logs").join(format!("{role}.log"));
+                    failure = Some(
+                        if supervisor.last_exit(&role) == Some(ExitStatus::Code(EXIT_BAD_INPUT)) {
+                            Failure::input(format!(
+                                "`{role}` refused its input: {}",
+                                last_error_line(&log)
+                            ))
+                        } else {
+                            Failure::run(format!(
+                                "`{role}` kept failing and its restart policy gave up (see {})",
+                                log.display()
+                            ))
+                        },
+                    );
                     exit_reason = Some(Some("process_failed"));
                 }
             }
@@ -373,12 +391,24 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     )?;
     report(&summary_path, &args.out);
     match failure {
-        Some(message) => Err(Failure::run(message)),
+        Some(failure) => Err(failure),
         None => Ok(RunOutcome {
             summary_path,
             stats: collector,
         }),
     }
+}
+
+/// The last `error:` line of a process log (or where the log is).
+fn last_error_line(log: &Path) -> String {
+    std::fs::read_to_string(log)
+        .ok()
+        .and_then(|text| {
+            text.lines()
+                .rev()
+                .find_map(|l| l.strip_prefix("error: ").map(str::to_string))
+        })
+        .unwrap_or_else(|| format!("see {}", log.display()))
 }
 
 /// Publishes every role's state and restarts on stack/processes (for `mole top`).
@@ -444,6 +474,12 @@ fn child_env(
         ),
     ];
     env.push(("MOLE_SEED".to_string(), seed.to_string()));
+    if let Some((x, y)) = args.goal {
+        env.push(("MOLE_GOAL".to_string(), format!("{x},{y}")));
+    }
+    if let Some(local) = &args.local_planner {
+        env.push(("MOLE_LOCAL_PLANNER".to_string(), local.clone()));
+    }
     env
 }
 

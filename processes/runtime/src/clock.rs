@@ -42,6 +42,15 @@ impl FromStr for ClockMode {
     }
 }
 
+/// Parses `X,Y` (metres) from a command line or an environment variable, e.g. `--goal 8.5,9`.
+pub fn parse_point(text: &str) -> Result<(f64, f64), String> {
+    let parsed = text.split_once(',').and_then(|(x, y)| {
+        let (x, y) = (x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?);
+        (x.is_finite() && y.is_finite()).then_some((x, y))
+    });
+    parsed.ok_or_else(|| format!("expected X,Y in metres (e.g. 8.5,9), found `{text}`"))
+}
+
 /// Decides whether a step is due from the ticks of a process's inputs.
 ///
 /// The first input is the trigger. Realtime: a step is due whenever the trigger carries a tick
@@ -105,6 +114,13 @@ mod tests {
         assert_eq!(gate.ready(&[Some(5), Some(9)]), None);
         assert_eq!(gate.ready(&[Some(7), Some(2)]), Some(7));
         assert_eq!(gate.last(), Some(7));
+    }
+
+    #[test]
+    fn points_parse_and_bad_ones_are_named() {
+        assert_eq!(parse_point("8.5, 9"), Ok((8.5, 9.0)));
+        assert!(parse_point("8.5").unwrap_err().contains("`8.5`"));
+        assert!(parse_point("nan,1").is_err());
     }
 
     #[test]

@@ -19,7 +19,7 @@ mod ports;
 mod stats;
 
 pub use alloc_counter::{CountingAllocator, allocations_during};
-pub use clock::{ClockMode, StepGate};
+pub use clock::{ClockMode, StepGate, parse_point};
 pub use node::{
     Attachment, CommonArgs, Context, RuntimeError, WaitSet, Wake, cleanup_dead_nodes, init_tracing,
     list_topics, live_nodes_in_namespace, now_ns,

@@ -6,7 +6,10 @@
 
 use clap::Parser;
 use mole_runtime::{ClockMode, CommonArgs, Context, Wake, now_ns};
-use mole_types::{END_GOAL_REACHED, END_STOPPED, END_TICKS, TICK_END, TRUTH_END, topics};
+use mole_types::{
+    END_EXPLORATION_COMPLETE, END_GOAL_REACHED, END_STOPPED, END_TICKS, MODE_DONE, TICK_END,
+    TRUTH_END, topics,
+};
 use mole_world::{World, load_scenario};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -84,6 +87,7 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
     let mut command_latency_ns = 0_u64;
     let mut command_received = Instant::now();
     let mut last_applied_tick: Option<u64> = None;
+    let mut exploration_complete = false;
 
     let mut publish_step = |tick: u64, world: &World, latency_ns: u64, end: u32| {
         let origin = now_ns();
@@ -120,8 +124,10 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
             return Ok(());
         }
         let mut fresh = None;
-        cmd_sub
-            .drain(|cmd| fresh = Some((cmd.header.tick, cmd.v, cmd.omega, cmd.header.origin_ns)));
+        cmd_sub.drain(|cmd| {
+            fresh = Some((cmd.header.tick, cmd.v, cmd.omega, cmd.header.origin_ns));
+            exploration_complete = cmd.mode == MODE_DONE;
+        });
         if let Some((cmd_tick, v, omega, origin)) = fresh {
             command = (v, omega);
             command_latency_ns = now_ns().saturating_sub(origin);
@@ -160,6 +166,9 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
             END_TICKS
         } else if stop_at_goal && world.goal_reached() {
             END_GOAL_REACHED
+        } else if exploration_complete {
+            // The planner found no reachable frontier left (seed §5): the run is done.
+            END_EXPLORATION_COMPLETE
         } else {
             0
         };
