@@ -179,6 +179,7 @@ impl Context {
         args: &CommonArgs,
         shutdown: Arc<AtomicBool>,
     ) -> Result<Context, RuntimeError> {
+        set_log_level_from_env_or(LogLevel::Error);
         cleanup_dead_nodes();
         let node_name = format!("mole/{}/{role}", args.namespace);
         let name: NodeName = node_name
