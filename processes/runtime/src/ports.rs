@@ -97,8 +97,10 @@ pub struct Subscriber<M: Message> {
 impl<M: Message> Subscriber<M> {
     /// Takes every new message in arrival order; invalid ones are dropped and counted. The last
     /// valid one stays available through [`Subscriber::latest`]. Returns how many were valid.
+    ///
+    /// No system call: the wake-up signals are consumed by [`crate::WaitSet::wait`], so a busy
+    /// poller pays only for reading shared memory.
     pub fn drain(&mut self, mut on_message: impl FnMut(&M)) -> usize {
-        self.clear_events();
         let mut valid = 0;
         while let Some(sample) = self.next_valid() {
             on_message(sample.payload());
@@ -110,7 +112,6 @@ impl<M: Message> Subscriber<M> {
 
     /// Keeps only the newest valid message; returns whether a new one arrived.
     pub fn update(&mut self) -> bool {
-        self.clear_events();
         let mut fresh = false;
         while let Some(sample) = self.next_valid() {
             // Release the older sample before keeping the newer one.
@@ -145,11 +146,6 @@ impl<M: Message> Subscriber<M> {
         }
     }
 
-    fn clear_events(&self) {
-        if let Err(e) = self.listener.try_wait(|_| {}) {
-            tracing::debug!(topic = self.topic, "listener drain failed: {e:?}");
-        }
-    }
 
     fn next_valid(&mut self) -> Option<Sample<ipc::Service, M, ()>> {
         loop {
