@@ -399,6 +399,14 @@ impl<P: Planner> Planner for BounceBack<P> {
     fn target(&self) -> Option<[f64; 2]> {
         self.inner.target()
     }
+
+    /// The wrapped planner's status, with this layer's mode while it bounces and its count.
+    fn write_status(&self, status: &mut mole_types::PlanStatus) {
+        self.inner.write_status(status);
+        // The command last sent carries the mode: the layer's own while it bounces.
+        status.mode = self.prev.mode;
+        status.bounces = self.bounces;
+    }
 }
 
 #[cfg(test)]

@@ -9,18 +9,33 @@
 //! Every command a planner returns is finite, within the speed limits and within the
 //! acceleration limits relative to the previous command ([`RobotLimits::limit`]).
 
+pub mod apf;
 pub mod bounce_back;
+pub mod distance_field;
+pub mod dwa;
+pub mod frontier;
+pub mod global_path;
+pub mod goal_seeker;
+pub mod grid_search;
 pub mod obstacles;
 pub mod random_walk;
+
+pub use apf::{Apf, ApfConfig, ApfForm};
+pub use distance_field::DistanceField;
+pub use dwa::{Critics, Dwa, DwaConfig, DwaCost};
+pub use frontier::{FrontierConfig, FrontierExplorer};
+pub use global_path::{GlobalPath, PathKind};
+pub use goal_seeker::GoalSeeker;
+pub use grid_search::GridSearch;
 
 pub use bounce_back::{BounceBack, BounceBackConfig, PositionUpdate, bounce_back_position};
 pub use random_walk::{DiagonalStride, RandomWalk, RandomWalkConfig, WalkReport};
 
-use mole_types::{Grid, MODE_IDLE, Pose2, RobotSpec, Scan, Tactile};
+use mole_types::{Grid, MODE_IDLE, PlanStatus, Pose2, RobotSpec, STATUS_HAS_GOAL, Scan, Tactile};
 use thiserror::Error;
 
 /// The planners [`planner_by_name`] knows.
-pub const KNOWN_PLANNERS: &[&str] = &["random-walk"];
+pub const KNOWN_PLANNERS: &[&str] = &["random-walk", "apf", "dwa", "frontier"];
 
 /// Why a planner could not be built or a pure function could not run.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -40,6 +55,12 @@ pub enum PlanningError {
         value: f64,
         /// What it must be.
         expected: &'static str,
+    },
+    /// A goal-seeking planner was asked for without a goal.
+    #[error("planner `{name}` needs a goal: pass `--goal X,Y` (or give the scenario a [goal])")]
+    MissingGoal {
+        /// The planner asked for.
+        name: String,
     },
 }
 
@@ -175,6 +196,21 @@ pub trait Planner {
     fn target(&self) -> Option<[f64; 2]> {
         None
     }
+    /// Fills `planning/status` (everything but the header) after a step: by default the last
+    /// mode is unknown here, so `mode` is left as the caller set it (the step's command mode);
+    /// goal = [`Planner::target`] with `STATUS_HAS_GOAL`, bounces, no frontier, no path.
+    fn write_status(&self, status: &mut PlanStatus) {
+        status.flags = 0;
+        if let Some([x, y]) = self.target() {
+            (status.goal_x, status.goal_y) = (x, y);
+            status.flags |= STATUS_HAS_GOAL;
+        } else {
+            (status.goal_x, status.goal_y) = (0.0, 0.0);
+        }
+        (status.frontier_x, status.frontier_y) = (0.0, 0.0);
+        status.bounces = self.bounces();
+        status.n_path = 0;
+    }
 }
 
 impl<P: Planner + ?Sized> Planner for Box<P> {
@@ -195,6 +231,9 @@ impl<P: Planner + ?Sized> Planner for Box<P> {
     }
     fn target(&self) -> Option<[f64; 2]> {
         (**self).target()
+    }
+    fn write_status(&self, status: &mut PlanStatus) {
+        (**self).write_status(status)
     }
 }
 
@@ -221,23 +260,165 @@ pub(crate) fn stop_command(limits: &RobotLimits, prev: &Command, dt: f64) -> Com
     }
 }
 
-/// Build the configured planner by name (`random-walk`: the seed §3 random walk inside the seed §4
-/// bounce-back layer); an unknown name is an error listing the known ones.
+/// Which local planner drives the goal-seeking planners (the frontier follower, and the
+/// re-planning after a bounce-back, seed §4 "path re-planning: APF or DWA").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LocalPlanner {
+    /// Dynamic window approach (seed §4.2).
+    #[default]
+    Dwa,
+    /// Artificial potential field (seed §1).
+    Apf,
+}
+
+/// What `--planner`, `--goal` and friends ask for; see [`build_planner`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannerConfig {
+    /// `random-walk` | `apf` | `dwa` | `frontier`.
+    pub name: String,
+    /// Goal (world, m): required by `apf` and `dwa`.
+    pub goal: Option<(f64, f64)>,
+    /// Local planner of `frontier`.
+    pub local: LocalPlanner,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// The bounce-back layer's settings.
+    pub bounce_back: BounceBackConfig,
+    /// APF settings (`apf`, and `frontier` with `local = Apf`).
+    pub apf: ApfConfig,
+    /// DWA settings (`dwa`, and `frontier` with `local = Dwa`).
+    pub dwa: DwaConfig,
+    /// Frontier settings.
+    pub frontier: FrontierConfig,
+    /// Random-walk settings.
+    pub random_walk: RandomWalkConfig,
+    /// Which local planner re-plans after a bounce-back for `apf` and `dwa` (seed §4 "path
+    /// re-planning: APF or DWA"); `None` = the planner itself (the default).
+    pub replan_with: Option<LocalPlanner>,
+    /// How long (s) `replan_with` drives after a bounce before handing back.
+    pub replan_time: f64,
+}
+
+impl PlannerConfig {
+    /// Defaults for planner `name`.
+    pub fn new(name: &str) -> Self {
+        Self {
+            name: name.to_owned(),
+            goal: None,
+            local: LocalPlanner::default(),
+            seed: 0,
+            // DWA keeps its own margin (0.1 m); the reactive layer is then the last resort only.
+            bounce_back: if matches!(name, "dwa" | "frontier") {
+                BounceBackConfig {
+                    d_th: 0.05,
+                    d_release: 0.12,
+                    ..BounceBackConfig::default()
+                }
+            } else {
+                BounceBackConfig::default()
+            },
+            apf: ApfConfig::default(),
+            dwa: DwaConfig::default(),
+            frontier: FrontierConfig::default(),
+            random_walk: RandomWalkConfig::default(),
+            replan_with: None,
+            replan_time: 5.0,
+        }
+    }
+}
+
+/// Builds the configured planner inside the bounce-back layer (seed §4): `random-walk` (§3),
+/// `apf` (§1) and `dwa` (§4.2) toward `config.goal` (an error naming `--goal X,Y` without one),
+/// `frontier` (§5) with `config.local` following the path.
+pub fn build_planner(
+    config: &PlannerConfig,
+    limits: RobotLimits,
+) -> Result<Box<dyn Planner>, PlanningError> {
+    let goal = || {
+        config
+            .goal
+            .filter(|g| g.0.is_finite() && g.1.is_finite())
+            .map(|g| [g.0, g.1])
+            .ok_or_else(|| PlanningError::MissingGoal {
+                name: config.name.clone(),
+            })
+    };
+    let bb = config.bounce_back;
+    // `apf` / `dwa` with another planner re-planning after a bounce.
+    let primary = match config.name.as_str() {
+        "apf" => Some(LocalPlanner::Apf),
+        "dwa" => Some(LocalPlanner::Dwa),
+        _ => None,
+    };
+    if let (Some(primary), Some(with)) = (primary, config.replan_with)
+        && with != primary
+    {
+        return Ok(Box::new(BounceBack::new(
+            GoalSeeker::new(
+                limits,
+                goal()?,
+                primary,
+                with,
+                config.replan_time,
+                config.dwa,
+                config.apf,
+                config.seed,
+            ),
+            limits,
+            bb,
+        )));
+    }
+    Ok(match config.name.as_str() {
+        "random-walk" => Box::new(BounceBack::new(
+            RandomWalk::new(limits, config.random_walk, config.seed),
+            limits,
+            bb,
+        )),
+        "apf" => Box::new(BounceBack::new(
+            Apf::new(limits, config.apf, goal()?, config.seed),
+            limits,
+            bb,
+        )),
+        "dwa" => Box::new(BounceBack::new(
+            Dwa::new(limits, config.dwa, goal()?),
+            limits,
+            bb,
+        )),
+        "frontier" => Box::new(BounceBack::new(
+            FrontierExplorer::new(
+                limits,
+                config.frontier,
+                config.local,
+                config.dwa,
+                config.apf,
+                config.seed,
+            ),
+            limits,
+            bb,
+        )),
+        _ => {
+            return Err(PlanningError::UnknownPlanner {
+                name: config.name.clone(),
+            });
+        }
+    })
+}
+
+/// Build the configured planner by name with every default and no goal (kept for callers that
+/// have only a name: `apf` and `dwa` then fail with [`PlanningError::MissingGoal`]); an unknown
+/// name is an error listing the known ones.
 pub fn planner_by_name(
     name: &str,
     limits: RobotLimits,
     seed: u64,
 ) -> Result<Box<dyn Planner>, PlanningError> {
-    match name {
-        "random-walk" => Ok(Box::new(BounceBack::new(
-            RandomWalk::new(limits, RandomWalkConfig::default(), seed),
-            limits,
-            BounceBackConfig::default(),
-        ))),
-        _ => Err(PlanningError::UnknownPlanner {
-            name: name.to_owned(),
-        }),
-    }
+    build_planner(
+        &PlannerConfig {
+            seed,
+            ..PlannerConfig::new(name)
+        },
+        limits,
+    )
 }
 
 #[cfg(test)]

@@ -5,7 +5,9 @@
 //! step → planning/cmd and planning/status.
 
 use clap::Parser;
-use mole_planning::{PlannerInput, RobotLimits, planner_by_name};
+use mole_planning::{
+    KNOWN_PLANNERS, LocalPlanner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
+};
 use mole_runtime::{ClockMode, CommonArgs, Context, StepGate, Wake};
 use mole_types::{Pose2, topics};
 use std::process::ExitCode;
@@ -15,21 +17,52 @@ use std::process::ExitCode;
 struct Args {
     #[command(flatten)]
     common: CommonArgs,
-    /// Planner: random-walk.
+    /// Planner: random-walk, apf, dwa or frontier.
     #[arg(long, env = "MOLE_PLANNER", default_value = "random-walk")]
     planner: String,
+    /// Goal X,Y (m) for apf and dwa; the scenario's goal otherwise.
+    #[arg(long, env = "MOLE_GOAL", value_parser = mole_runtime::parse_point)]
+    goal: Option<(f64, f64)>,
+    /// Local planner that follows the frontier path: dwa or apf.
+    #[arg(long, env = "MOLE_LOCAL_PLANNER", default_value = "dwa", value_parser = parse_local)]
+    local: LocalPlanner,
+}
+
+fn parse_local(text: &str) -> Result<LocalPlanner, String> {
+    match text {
+        "dwa" => Ok(LocalPlanner::Dwa),
+        "apf" => Ok(LocalPlanner::Apf),
+        other => Err(format!("expected dwa or apf, found `{other}`")),
+    }
 }
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    if !KNOWN_PLANNERS.contains(&args.planner.as_str()) {
+        eprintln!(
+            "error: --planner: unknown planner `{}`, expected one of {}",
+            args.planner,
+            KNOWN_PLANNERS.join(", ")
+        );
+        return ExitCode::from(2);
+    }
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.is::<BadInput>() => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
         Err(e) => {
             tracing::error!("{e}");
             ExitCode::FAILURE
         }
     }
 }
+
+/// A configuration the planner refuses (a goal-seeking planner without a goal).
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+struct BadInput(mole_planning::PlanningError);
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("planning", &args.common)?;
@@ -62,16 +95,16 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             && map_sub.update()
             && let Some(map) = map_sub.latest()
         {
-            let limits = RobotLimits {
-                radius: map.robot.radius,
-                max_speed: map.robot.max_speed,
-                max_omega: map.robot.max_omega,
-                max_accel: map.robot.max_accel,
-                max_alpha: map.robot.max_alpha,
-            };
+            let limits = RobotLimits::from(&map.robot);
             dt = map.dt;
-            let seed = ctx.seed().unwrap_or(map.seed);
-            planner = Some(planner_by_name(&args.planner, limits, seed)?);
+            let mut config = PlannerConfig::new(&args.planner);
+            config.seed = ctx.seed().unwrap_or(map.seed);
+            config.local = args.local;
+            config.goal = args
+                .goal
+                .or((map.has_goal == 1).then_some((map.goal_x, map.goal_y)));
+            // A planner that cannot be built is bad input (exit 2), not a crash to retry.
+            planner = Some(build_planner(&config, limits).map_err(BadInput)?);
             tracing::info!(planner = %args.planner, "map received");
         }
         let Some(planner) = planner.as_mut() else {
@@ -114,15 +147,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             cmd.mode = command.mode;
             cmd._pad = 0;
         })?;
-        status_pub.publish(tick, origin, |status| {
-            status.mode = command.mode;
-            status.flags = 0;
-            let [tx, ty] = planner.target().unwrap_or([input.pose.x, input.pose.y]);
-            (status.goal_x, status.goal_y) = (tx, ty);
-            (status.frontier_x, status.frontier_y) = (0.0, 0.0);
-            status.bounces = planner.bounces();
-            status.n_path = 0;
-        })?;
+        status_pub.publish(tick, origin, |status| planner.write_status(status))?;
         ctx.count_step();
     }
 }

@@ -1,0 +1,139 @@
+//! Planner benchmarks: DWA command (20 × 20 window, 3 s horizon), frontier selection on a
+//! 400 × 400 grid, APF force at a point with a distance field.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use mole_planning::apf::{Apf, ApfConfig};
+use mole_planning::dwa::{Dwa, DwaConfig, DwaState, Sampling};
+use mole_planning::frontier::{FrontierConfig, FrontierSelector};
+use mole_planning::{DistanceField, RobotLimits};
+use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid};
+use std::hint::black_box;
+
+fn limits() -> RobotLimits {
+    RobotLimits {
+        radius: 0.2,
+        max_speed: 0.5,
+        max_omega: 2.0,
+        max_accel: 2.0,
+        max_alpha: 8.0,
+    }
+}
+
+/// A w × h grid at `res` with walls, scattered boxes, and the right third unexplored.
+fn grid(w: usize, h: usize, res: f64) -> Box<Grid> {
+    let mut g: Box<Grid> = bytemuck::zeroed_box();
+    g.width = w as u32;
+    g.height = h as u32;
+    g.resolution = res;
+    for r in 0..h {
+        for c in 0..w {
+            let border = r == 0 || c == 0 || r == h - 1 || c == w - 1;
+            let boxed = (c / 20) % 3 == 1 && (r / 20) % 3 == 1 && c % 20 < 8 && r % 20 < 8;
+            g.cells[r * w + c] = if border || boxed {
+                CELL_OCCUPIED
+            } else if c > 2 * w / 3 {
+                CELL_UNEXPLORED
+            } else {
+                CELL_FREE
+            };
+        }
+    }
+    g
+}
+
+fn benches(c: &mut Criterion) {
+    let g = grid(200, 200, 0.05);
+    // A ring of wall 2 m around the robot, in the grid and in the scan (the mapping folds each
+    // scan into the grid, so the scan's hits are known cells).
+    let mut ringed = grid(200, 200, 0.05);
+    for k in 0..3600 {
+        let a = k as f64 * std::f64::consts::TAU / 3600.0;
+        let (x, y) = (3.0 + 2.02 * a.cos(), 3.0 + 2.02 * a.sin());
+        let i = (y / 0.05) as usize * 200 + (x / 0.05) as usize;
+        ringed.cells[i] = CELL_OCCUPIED;
+    }
+    let mut scan: Box<mole_types::Scan> = bytemuck::zeroed_box();
+    scan.n_beams = 360;
+    scan.angle_min = -std::f32::consts::PI;
+    scan.angle_increment = std::f32::consts::TAU / 360.0;
+    scan.range_max = 4.0;
+    for r in scan.ranges.iter_mut().take(360) {
+        *r = 2.0;
+    }
+    let mut dwa = Dwa::new(
+        limits(),
+        DwaConfig {
+            sampling: Sampling::Count { nv: 20, nw: 20 },
+            predict_time: 3.0,
+            ..Default::default()
+        },
+        [8.0, 8.0],
+    );
+    let input = mole_planning::PlannerInput {
+        tick: 0,
+        dt: 0.05,
+        pose: mole_types::Pose2::new(3.0, 3.0, 0.5),
+        scan: Some(&scan),
+        tactile: None,
+        grid: Some(&ringed),
+    };
+    dwa.follow(&input);
+    // The whole command: field check, scan folding, 400 rollouts of 3 s.
+    c.bench_function("dwa_20x20_3s", |b| {
+        b.iter(|| black_box(dwa.follow(black_box(&input))))
+    });
+    let s = DwaState {
+        x: 3.0,
+        y: 3.0,
+        theta: 0.5,
+        v: 0.3,
+        omega: 0.0,
+    };
+    c.bench_function("dwa_choose_only_20x20_3s", |b| {
+        b.iter(|| black_box(dwa.choose(black_box(&s))))
+    });
+    // The global path (every `replan_every` steps): A* over the inflated 200 × 200 grid.
+    let mut gp = mole_planning::GlobalPath::new();
+    let mut field = DistanceField::new();
+    field.update(&g);
+    c.bench_function("dwa_global_plan_200x200", |b| {
+        b.iter(|| black_box(gp.plan(&g, &field, [1.0, 1.0], [6.5, 8.5], 0.32)))
+    });
+
+    let big = grid(400, 400, 0.05);
+    let mut sel = FrontierSelector::new(FrontierConfig::default(), 0.2);
+    sel.select(&big, [3.0, 3.0]);
+    c.bench_function("frontier_select_400x400", |b| {
+        b.iter(|| black_box(sel.select(black_box(&big), [3.0, 3.0])))
+    });
+
+    c.bench_function("distance_field_build_200x200", |b| {
+        b.iter(|| {
+            let mask = g.cells();
+            field.build_from_mask(200, 200, 0.05, [0.0, 0.0], black_box(mask));
+        })
+    });
+
+    let mut apf = Apf::new(limits(), ApfConfig::default(), [8.0, 8.0], 1);
+    apf.set_goal([8.0, 8.0]);
+    let mut st = mole_types::Pose2::new(3.0, 3.0, 0.0);
+    // Feed the grid once so the field is built.
+    let input = mole_planning::PlannerInput {
+        tick: 0,
+        dt: 0.05,
+        pose: st,
+        scan: None,
+        tactile: None,
+        grid: Some(&g),
+    };
+    mole_planning::Planner::step(&mut apf, &input);
+    c.bench_function("apf_force_at_point", |b| {
+        b.iter(|| {
+            st.x = (st.x + 0.013) % 9.0;
+            black_box(apf.force(black_box([st.x + 0.5, 3.1]), None))
+        })
+    });
+}
+
+criterion_group!(planners, benches);
+criterion_main!(planners);

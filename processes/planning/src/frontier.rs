@@ -1,0 +1,694 @@
+//! Frontier exploration (seed §5; Yamauchi, "A frontier-based approach for autonomous
+//! exploration", CIRA 1997).
+//!
+//! F = free cells with an unexplored 4-neighbour (§5.2), grouped into 8-connected clusters of at
+//! least `min_cluster` cells. Each cluster is a candidate f, represented by its reachable cell
+//! nearest its centroid; I(f) = unexplored cells within `gain_radius` (a square window, counted
+//! with a summed-area table), L(f) from ONE Dijkstra search out of the robot's cell (octile, no
+//! corner cutting, through free cells farther than the robot radius from any occupied cell, or
+//! through all free cells when the robot's own cell is inside that inflation), and
+//! C(f) = −α·I/I_max + β·L/L_max with I_max, L_max over the current candidates (§5.3). The chosen
+//! frontier's path comes from the Dijkstra predecessors, shortened by line of sight to at most
+//! `MAX_PATH` waypoints, and a local planner (DWA or APF) follows a carrot on it. Re-selection:
+//! when the frontier is reached, vanishes, or every `reselect_every` steps. Done when no reachable
+//! frontier is left (`MODE_DONE`, `STATUS_EXPLORATION_COMPLETE`, zero command).
+
+use crate::apf::{Apf, ApfConfig};
+use crate::distance_field::DistanceField;
+use crate::dwa::{Dwa, DwaConfig};
+use crate::global_path::GlobalPath;
+use crate::grid_search::GridSearch;
+use crate::{Command, LocalPlanner, Planner, PlannerInput, RobotLimits, stop_command, usable};
+use mole_types::{
+    CELL_FREE, CELL_UNEXPLORED, Grid, MAX_GRID_CELLS, MAX_PATH, MODE_DONE, MODE_EXPLORE,
+    PlanStatus, STATUS_EXPLORATION_COMPLETE, STATUS_HAS_FRONTIER, STATUS_HAS_GOAL, wrap_angle,
+};
+
+/// Settings of the frontier planner.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrontierConfig {
+    /// Clusters smaller than this (cells) are ignored.
+    pub min_cluster: usize,
+    /// Radius (m) of the information-gain window N(f).
+    pub gain_radius: f64,
+    /// α: weight of the information gain.
+    pub alpha: f64,
+    /// β: weight of the path length.
+    pub beta: f64,
+    /// Re-select at least every this many steps.
+    pub reselect_every: u64,
+    /// The frontier counts as reached within this distance (m).
+    pub reached_distance: f64,
+    /// Carrot distance (m) along the path.
+    pub lookahead: f64,
+    /// Extra inflation (m) over the robot radius (above the DWA's hard margin, so that the
+    /// path leaves the local planner room).
+    pub inflation_margin: f64,
+    /// Selections in a row without a reachable frontier before exploration is declared done.
+    pub done_after: u32,
+}
+
+impl Default for FrontierConfig {
+    fn default() -> Self {
+        Self {
+            min_cluster: 4,
+            gain_radius: 1.0,
+            alpha: 1.0,
+            beta: 1.0,
+            reselect_every: 200,
+            reached_distance: 0.35,
+            lookahead: 0.6,
+            inflation_margin: 0.12,
+            done_after: 3,
+        }
+    }
+}
+
+/// A scored frontier candidate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frontier {
+    /// Representative cell (row-major index).
+    pub cell: usize,
+    /// Its centre (world, m).
+    pub x: f64,
+    pub y: f64,
+    /// Cells in the cluster.
+    pub size: usize,
+    /// I(f): unexplored cells in N(f).
+    pub gain: f64,
+    /// L(f) (m).
+    pub length: f64,
+    /// C(f).
+    pub cost: f64,
+}
+
+/// Seed §5.3: C(f) = −α·I/I_max + β·L/L_max.
+pub fn frontier_cost(gain: f64, length: f64, i_max: f64, l_max: f64, alpha: f64, beta: f64) -> f64 {
+    let i = if i_max > 0.0 { gain / i_max } else { 0.0 };
+    let l = if l_max > 0.0 { length / l_max } else { 0.0 };
+    -alpha * i + beta * l
+}
+
+/// Seed §5.2: whether cell `i` of a `w`-wide 0/1/2 grid is a frontier cell (free, with an
+/// unexplored 4-neighbour).
+#[inline]
+pub fn is_frontier_cell(cells: &[u8], w: usize, h: usize, i: usize) -> bool {
+    if cells.get(i) != Some(&CELL_FREE) {
+        return false;
+    }
+    let (c, r) = (i % w, i / w);
+    (c > 0 && cells[i - 1] == CELL_UNEXPLORED)
+        || (c + 1 < w && cells[i + 1] == CELL_UNEXPLORED)
+        || (r > 0 && cells[i - w] == CELL_UNEXPLORED)
+        || (r + 1 < h && cells[i + w] == CELL_UNEXPLORED)
+}
+
+/// The detection, clustering, scoring and path machinery, with every buffer preallocated.
+#[derive(Debug, Clone)]
+pub struct FrontierSelector {
+    config: FrontierConfig,
+    radius: f64,
+    w: usize,
+    h: usize,
+    res: f64,
+    origin: [f64; 2],
+    field: DistanceField,
+    search: GridSearch,
+    passable: Vec<bool>,
+    label: Vec<u32>,
+    stack: Vec<u32>,
+    integral: Vec<u32>,
+    candidates: Vec<Frontier>,
+    path_cells: Vec<u32>,
+    path: Vec<[f64; 2]>,
+}
+
+impl FrontierSelector {
+    /// A selector for a robot of `radius` m, with buffers for the largest grid.
+    pub fn new(config: FrontierConfig, radius: f64) -> Self {
+        let n = MAX_GRID_CELLS;
+        Self {
+            config,
+            radius: if radius.is_finite() && radius > 0.0 {
+                radius
+            } else {
+                0.0
+            },
+            w: 0,
+            h: 0,
+            res: 1.0,
+            origin: [0.0; 2],
+            field: DistanceField::with_capacity(n),
+            search: GridSearch::with_capacity(n),
+            passable: Vec::with_capacity(n),
+            label: Vec::with_capacity(n),
+            stack: Vec::with_capacity(n),
+            integral: Vec::with_capacity(n + 1024),
+            candidates: Vec::with_capacity(n / 4),
+            path_cells: Vec::with_capacity(n),
+            path: Vec::with_capacity(MAX_PATH),
+        }
+    }
+
+    /// The candidates of the last selection.
+    pub fn candidates(&self) -> &[Frontier] {
+        &self.candidates
+    }
+
+    /// The chosen frontier's path (world, m; robot first), at most `MAX_PATH` points.
+    pub fn path(&self) -> &[[f64; 2]] {
+        &self.path
+    }
+
+    fn centre(&self, i: usize) -> [f64; 2] {
+        [
+            self.origin[0] + ((i % self.w) as f64 + 0.5) * self.res,
+            self.origin[1] + ((i / self.w) as f64 + 0.5) * self.res,
+        ]
+    }
+
+    /// Detects, clusters and scores the frontiers of `grid` seen from `robot` and returns the
+    /// cheapest reachable one (and fills its path); `None` if none is reachable or the grid is
+    /// unusable. Allocation-free once the buffers have the grid's size.
+    pub fn select(&mut self, grid: &Grid, robot: [f64; 2]) -> Option<Frontier> {
+        self.candidates.clear();
+        self.path.clear();
+        let res = grid.resolution;
+        if !(res.is_finite() && res > 0.0 && grid.origin_x.is_finite() && grid.origin_y.is_finite())
+        {
+            return None;
+        }
+        let cells = grid.cells();
+        let (w, h) = (grid.width as usize, grid.height as usize);
+        if w == 0 || h == 0 || cells.len() != w * h {
+            return None;
+        }
+        (self.w, self.h, self.res, self.origin) = (w, h, res, [grid.origin_x, grid.origin_y]);
+        let col = ((robot[0] - grid.origin_x) / res).floor();
+        let row = ((robot[1] - grid.origin_y) / res).floor();
+        if !(col >= 0.0 && row >= 0.0 && col < w as f64 && row < h as f64) {
+            return None;
+        }
+        let source = row as usize * w + col as usize;
+        self.field.update(grid);
+        // Free cells outside the inflation; without inflation if the robot sits inside it.
+        let keep = self.radius + self.config.inflation_margin;
+        self.field.clear_of(keep, &mut self.passable);
+        if self.passable.len() != cells.len() {
+            return None;
+        }
+        for (p, c) in self.passable.iter_mut().zip(cells) {
+            *p &= *c == CELL_FREE;
+        }
+        if !self.passable[source] {
+            for (p, c) in self.passable.iter_mut().zip(cells) {
+                *p = *c == CELL_FREE;
+            }
+        }
+        let passable = &self.passable;
+        self.search.dijkstra(w, h, &|i| passable[i], source);
+        // Summed-area table of the unexplored cells, (w+1) × (h+1).
+        self.integral.clear();
+        self.integral.resize((w + 1) * (h + 1), 0);
+        for r in 0..h {
+            let mut run = 0u32;
+            for c in 0..w {
+                run += (cells[r * w + c] == CELL_UNEXPLORED) as u32;
+                self.integral[(r + 1) * (w + 1) + c + 1] = self.integral[r * (w + 1) + c + 1] + run;
+            }
+        }
+        // Clusters: 8-connected flood fill over the frontier cells.
+        const UNSEEN: u32 = u32::MAX;
+        const NOT_FRONTIER: u32 = u32::MAX - 1;
+        self.label.clear();
+        self.label.extend((0..w * h).map(|i| {
+            if is_frontier_cell(cells, w, h, i) {
+                UNSEEN
+            } else {
+                NOT_FRONTIER
+            }
+        }));
+        let gain_cells = (self.config.gain_radius / res).round().max(0.0) as usize;
+        let mut n_clusters = 0u32;
+        for seed in 0..w * h {
+            if self.label[seed] != UNSEEN {
+                continue;
+            }
+            // Pass 1: label the cluster and its centroid.
+            self.stack.clear();
+            self.stack.push(seed as u32);
+            self.label[seed] = n_clusters;
+            let (mut sx, mut sy, mut size) = (0.0, 0.0, 0usize);
+            let first = self.path_cells.len();
+            debug_assert_eq!(first, 0);
+            while let Some(c) = self.stack.pop() {
+                let c = c as usize;
+                size += 1;
+                sx += (c % w) as f64;
+                sy += (c / w) as f64;
+                self.path_cells.push(c as u32); // members, reused as scratch
+                let (cx, cy) = ((c % w) as i64, (c / w) as i64);
+                for dy in -1..=1i64 {
+                    for dx in -1..=1i64 {
+                        let (nx, ny) = (cx + dx, cy + dy);
+                        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                            continue;
+                        }
+                        let n = ny as usize * w + nx as usize;
+                        if self.label[n] == UNSEEN {
+                            self.label[n] = n_clusters;
+                            self.stack.push(n as u32);
+                        }
+                    }
+                }
+            }
+            n_clusters += 1;
+            let members = &self.path_cells;
+            if size >= self.config.min_cluster {
+                let (mx, my) = (sx / size as f64, sy / size as f64);
+                // The reachable member nearest the centroid.
+                let mut best: Option<(f64, usize, f64)> = None;
+                for &m in members {
+                    let m = m as usize;
+                    if let Some(l) = self.search.distance(m) {
+                        let d = ((m % w) as f64 - mx).hypot((m / w) as f64 - my);
+                        if best.is_none_or(|b| d < b.0) {
+                            best = Some((d, m, l));
+                        }
+                    }
+                }
+                if let Some((_, m, l)) = best {
+                    let (c, r) = (m % w, m / w);
+                    let (c0, c1) = (c.saturating_sub(gain_cells), (c + gain_cells + 1).min(w));
+                    let (r0, r1) = (r.saturating_sub(gain_cells), (r + gain_cells + 1).min(h));
+                    let s = |r: usize, c: usize| self.integral[r * (w + 1) + c] as i64;
+                    let gain = (s(r1, c1) - s(r0, c1) - s(r1, c0) + s(r0, c0)) as f64;
+                    let [x, y] = self.centre(m);
+                    if self.candidates.len() < self.candidates.capacity() {
+                        self.candidates.push(Frontier {
+                            cell: m,
+                            x,
+                            y,
+                            size,
+                            gain,
+                            length: l * res,
+                            cost: 0.0,
+                        });
+                    }
+                }
+            }
+            self.path_cells.clear();
+        }
+        // C(f) with I_max, L_max over the candidates.
+        let i_max = self.candidates.iter().map(|f| f.gain).fold(0.0, f64::max);
+        let l_max = self.candidates.iter().map(|f| f.length).fold(0.0, f64::max);
+        let (alpha, beta) = (self.config.alpha, self.config.beta);
+        let mut best: Option<Frontier> = None;
+        for f in self.candidates.iter_mut() {
+            f.cost = frontier_cost(f.gain, f.length, i_max, l_max, alpha, beta);
+            if best.is_none_or(|b| f.cost < b.cost) {
+                best = Some(*f);
+            }
+        }
+        let best = best?;
+        self.extract_path(best.cell, robot);
+        Some(best)
+    }
+
+    /// Whether the straight segment between cells a and b crosses only passable cells.
+    fn line_of_sight(&self, a: usize, b: usize) -> bool {
+        let w = self.w;
+        let (ax, ay) = ((a % w) as f64 + 0.5, (a / w) as f64 + 0.5);
+        let (bx, by) = ((b % w) as f64 + 0.5, (b / w) as f64 + 0.5);
+        let n = ((bx - ax).abs().max((by - ay).abs()) * 2.0).ceil() as usize;
+        (0..=n).all(|k| {
+            let t = if n == 0 { 0.0 } else { k as f64 / n as f64 };
+            let (x, y) = (ax + t * (bx - ax), ay + t * (by - ay));
+            let i = y as usize * w + x as usize;
+            self.passable.get(i).copied().unwrap_or(false) || i == a
+        })
+    }
+
+    fn extract_path(&mut self, target: usize, robot: [f64; 2]) {
+        let mut cells = core::mem::take(&mut self.path_cells);
+        self.search.path_to(target, &mut cells);
+        self.path.clear();
+        self.path.push(robot);
+        // Greedy line-of-sight shortening (bounded look-ahead keeps it linear-ish).
+        let mut anchor = 0usize;
+        while anchor + 1 < cells.len() {
+            let mut next = anchor + 1;
+            let mut j = anchor + 2;
+            while j < cells.len() && j - anchor <= 200 {
+                if self.line_of_sight(cells[anchor] as usize, cells[j] as usize) {
+                    next = j;
+                }
+                j += 1;
+            }
+            let p = self.centre(cells[next] as usize);
+            if self.path.len() < MAX_PATH {
+                self.path.push(p);
+            } else if let Some(last) = self.path.last_mut() {
+                *last = p;
+            }
+            anchor = next;
+        }
+        cells.clear();
+        self.path_cells = cells;
+    }
+}
+
+/// The frontier planner (seed §5) with a local planner following the path.
+#[derive(Debug, Clone)]
+pub struct FrontierExplorer {
+    limits: RobotLimits,
+    config: FrontierConfig,
+    local: LocalPlanner,
+    selector: FrontierSelector,
+    dwa: Dwa,
+    apf: Apf,
+    chosen: Option<Frontier>,
+    /// The chosen frontier's path, followed with a carrot (shared with the `dwa` planner).
+    follow: GlobalPath,
+    last_select: Option<u64>,
+    misses: u32,
+    done: bool,
+    prev: Command,
+    carrot: Option<[f64; 2]>,
+    selections: u64,
+}
+
+impl FrontierExplorer {
+    /// A frontier explorer with `local` following the path.
+    pub fn new(
+        limits: RobotLimits,
+        config: FrontierConfig,
+        local: LocalPlanner,
+        dwa: DwaConfig,
+        apf: ApfConfig,
+        seed: u64,
+    ) -> Self {
+        let limits = limits.sanitized();
+        Self {
+            limits,
+            config,
+            local,
+            selector: FrontierSelector::new(config, limits.radius),
+            dwa: Dwa::new(limits, dwa, [0.0, 0.0]),
+            apf: Apf::new(limits, apf, [0.0, 0.0], seed),
+            chosen: None,
+            follow: GlobalPath::new(),
+            last_select: None,
+            misses: 0,
+            done: false,
+            prev: Command::STOP,
+            carrot: None,
+            selections: 0,
+        }
+    }
+
+    /// The chosen frontier.
+    pub fn chosen(&self) -> Option<Frontier> {
+        self.chosen
+    }
+
+    /// Whether no reachable frontier is left.
+    pub fn done(&self) -> bool {
+        self.done
+    }
+
+    /// Selections made so far.
+    pub fn selections(&self) -> u64 {
+        self.selections
+    }
+
+    /// The selector (candidates, path).
+    pub fn selector(&self) -> &FrontierSelector {
+        &self.selector
+    }
+
+    fn needs_selection(&self, grid: &Grid, tick: u64, p: [f64; 2]) -> bool {
+        let Some(f) = self.chosen else { return true };
+        let Some(last) = self.last_select else {
+            return true;
+        };
+        let (w, h) = (grid.width as usize, grid.height as usize);
+        tick.saturating_sub(last) >= self.config.reselect_every
+            || (p[0] - f.x).hypot(p[1] - f.y) < self.config.reached_distance
+            || !is_frontier_cell(grid.cells(), w, h, f.cell)
+    }
+
+    fn carrot(&mut self, p: [f64; 2]) -> [f64; 2] {
+        self.follow.carrot(p, self.config.lookahead).unwrap_or(p)
+    }
+}
+
+impl Planner for FrontierExplorer {
+    fn name(&self) -> &'static str {
+        "frontier"
+    }
+
+    fn step(&mut self, input: &PlannerInput) -> Command {
+        if !usable(input) {
+            self.prev = stop_command(&self.limits, &self.prev, input.dt);
+            return self.prev;
+        }
+        let p = [input.pose.x, input.pose.y];
+        let Some(grid) = input.grid else {
+            // No map yet: look around in place.
+            let (v, omega) = self.limits.limit(&self.prev, 0.0, 0.5, input.dt);
+            self.prev = Command {
+                v,
+                omega,
+                mode: MODE_EXPLORE,
+            };
+            return self.prev;
+        };
+        if self.needs_selection(grid, input.tick, p) {
+            self.last_select = Some(input.tick);
+            self.selections += 1;
+            self.chosen = self.selector.select(grid, p);
+            self.follow.set_path(self.selector.path());
+            if self.chosen.is_some() {
+                self.misses = 0;
+                self.done = false;
+            } else if crate::obstacles::grid_cell(grid, p[0], p[1]) == Some(CELL_FREE) {
+                // The robot is on the map and no frontier is reachable.
+                self.misses += 1;
+                self.done = self.misses >= self.config.done_after;
+                // Look again soon.
+                self.last_select = Some(
+                    input
+                        .tick
+                        .saturating_sub(self.config.reselect_every.saturating_sub(20)),
+                );
+            }
+        }
+        let wish = if self.done {
+            self.carrot = None;
+            Command {
+                v: 0.0,
+                omega: 0.0,
+                mode: MODE_DONE,
+            }
+        } else if self.chosen.is_some() {
+            let carrot = self.carrot(p);
+            self.carrot = Some(carrot);
+            let c = match self.local {
+                LocalPlanner::Dwa => self.dwa.track(input, carrot, self.follow.remaining()),
+                LocalPlanner::Apf => {
+                    self.apf.set_goal(carrot);
+                    self.apf.step(input)
+                }
+            };
+            Command {
+                mode: if c.mode == mole_types::MODE_STALLED || c.mode == mole_types::MODE_ESCAPE {
+                    c.mode
+                } else {
+                    MODE_EXPLORE
+                },
+                ..c
+            }
+        } else {
+            // Nothing reachable yet (map still empty around the robot): turn in place to see.
+            let e = wrap_angle(0.5);
+            Command {
+                v: 0.0,
+                omega: e,
+                mode: MODE_EXPLORE,
+            }
+        };
+        let (v, omega) = self.limits.limit(&self.prev, wish.v, wish.omega, input.dt);
+        self.prev = Command {
+            v,
+            omega,
+            mode: wish.mode,
+        };
+        // Keep the local planners' velocity memory in step with what was sent.
+        self.prev
+    }
+
+    fn replan(&mut self) {
+        self.chosen = None;
+        self.apf.replan();
+    }
+
+    fn target(&self) -> Option<[f64; 2]> {
+        self.chosen.map(|f| [f.x, f.y])
+    }
+
+    fn write_status(&self, status: &mut PlanStatus) {
+        status.mode = self.prev.mode;
+        status.flags = 0;
+        (status.goal_x, status.goal_y) = (0.0, 0.0);
+        (status.frontier_x, status.frontier_y) = (0.0, 0.0);
+        status.n_path = 0;
+        status.bounces = 0;
+        if self.done {
+            status.flags |= STATUS_EXPLORATION_COMPLETE;
+            return;
+        }
+        if let Some(f) = self.chosen {
+            status.flags |= STATUS_HAS_FRONTIER;
+            (status.frontier_x, status.frontier_y) = (f.x, f.y);
+            if let Some(c) = self.carrot {
+                status.flags |= STATUS_HAS_GOAL;
+                (status.goal_x, status.goal_y) = (c[0], c[1]);
+            }
+            let path = self.selector.path();
+            let n = path.len().min(MAX_PATH);
+            for (out, p) in status.path.iter_mut().zip(&path[..n]) {
+                *out = [p[0] as f32, p[1] as f32];
+            }
+            status.n_path = n as u32;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::obstacles::test_support::grid_free;
+    use mole_types::CELL_OCCUPIED;
+
+    fn limits() -> RobotLimits {
+        RobotLimits {
+            radius: 0.2,
+            max_speed: 0.5,
+            max_omega: 2.0,
+            max_accel: 2.0,
+            max_alpha: 8.0,
+        }
+    }
+
+    #[test]
+    fn frontier_cells_are_free_with_an_unexplored_4_neighbour() {
+        let cells = [1, 1, 0, 1, 2, 1, 1, 1, 1];
+        let f: Vec<bool> = (0..9).map(|i| is_frontier_cell(&cells, 3, 3, i)).collect();
+        assert_eq!(
+            f,
+            [false, true, false, false, false, true, false, false, false]
+        );
+    }
+
+    #[test]
+    fn cost_trades_gain_against_length() {
+        assert_eq!(frontier_cost(10.0, 5.0, 10.0, 10.0, 1.0, 1.0), -0.5);
+        assert_eq!(frontier_cost(0.0, 0.0, 0.0, 0.0, 1.0, 1.0), 0.0);
+    }
+
+    /// A 4 m × 2 m free strip (0.1 m cells) with unexplored space left and right; a wall with a
+    /// gap splits it.
+    fn corridor() -> Box<Grid> {
+        let mut g = grid_free(60, 20, 0.1);
+        for r in 0..20 {
+            for c in 0..10 {
+                g.cells[r * 60 + c] = CELL_UNEXPLORED;
+            }
+            for c in 50..60 {
+                g.cells[r * 60 + c] = CELL_UNEXPLORED;
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn nearer_frontier_wins_at_equal_gain_and_walls_lengthen_paths() {
+        let g = corridor();
+        // A thin inflation (0.03 m): the 0.3 m gap below is passable only for a thin one.
+        let thin = FrontierConfig {
+            inflation_margin: 0.03,
+            ..FrontierConfig::default()
+        };
+        let mut s = FrontierSelector::new(thin, 0.2);
+        let f = s.select(&g, [2.0, 1.0]);
+        assert_eq!(s.candidates().len(), 2);
+        let f = f.unwrap_or_else(|| panic!("no frontier"));
+        // Robot at x = 2.0: the left frontier (x = 1.05) is nearer than the right one (4.95).
+        assert!((f.x - 1.05).abs() < 1e-9, "{f:?}");
+        assert!((f.length - 0.95).abs() < 0.15, "{f:?}");
+        // Path from the robot to the frontier, straight (line of sight).
+        assert_eq!(s.path().len(), 2, "{:?}", s.path());
+        // Wall at x = 1.5 with a gap near the top: the left frontier's path goes around it and
+        // the right one becomes the cheaper.
+        let mut g = corridor();
+        for r in 0..17 {
+            g.cells[r * 60 + 15] = CELL_OCCUPIED;
+        }
+        let f = s
+            .select(&g, [2.0, 0.5])
+            .unwrap_or_else(|| panic!("no frontier"));
+        let left = s.candidates().iter().find(|c| c.x < 2.0).map(|c| c.length);
+        assert!(left.is_some_and(|l| l > 2.5), "{:?}", s.candidates());
+        assert!(f.x > 4.0, "{f:?}");
+        assert!(s.path().len() >= 2);
+    }
+
+    #[test]
+    fn unreachable_frontier_is_excluded_and_inflation_falls_back() {
+        let mut g = corridor();
+        // Seal the left part off completely.
+        for r in 0..20 {
+            g.cells[r * 60 + 15] = CELL_OCCUPIED;
+        }
+        let mut s = FrontierSelector::new(FrontierConfig::default(), 0.2);
+        let f = s.select(&g, [3.0, 1.0]).unwrap_or_else(|| panic!("none"));
+        assert!(f.x > 4.0 && s.candidates().len() == 1);
+        // Robot pressed against the wall (inside the inflation): still plans.
+        let f = s.select(&g, [1.65, 1.0]);
+        assert!(f.is_some());
+    }
+
+    #[test]
+    fn explored_map_means_done_with_a_zero_command_and_the_flag() {
+        let g = grid_free(40, 40, 0.1);
+        let mut e = FrontierExplorer::new(
+            limits(),
+            FrontierConfig::default(),
+            LocalPlanner::Dwa,
+            DwaConfig::default(),
+            ApfConfig::default(),
+            1,
+        );
+        let mut c = Command::STOP;
+        for tick in 0..400 {
+            let input = PlannerInput {
+                tick,
+                dt: 0.01,
+                pose: mole_types::Pose2::new(2.0, 2.0, 0.0),
+                scan: None,
+                tactile: None,
+                grid: Some(&g),
+            };
+            c = e.step(&input);
+        }
+        assert!(e.done());
+        assert_eq!((c.v, c.omega, c.mode), (0.0, 0.0, MODE_DONE));
+        let mut st: Box<PlanStatus> = bytemuck::zeroed_box();
+        e.write_status(&mut st);
+        assert_eq!(
+            st.flags & STATUS_EXPLORATION_COMPLETE,
+            STATUS_EXPLORATION_COMPLETE
+        );
+    }
+}

@@ -1,0 +1,224 @@
+//! Closed loop on the real world (mole-world dynamics and contacts), a noise-free lidar
+//! (mole-sensing's ray caster) and the real frontier grid (mole-mapping): DWA reaches the goal
+//! of cluttered.toml without penetration, frontier exploration covers the maze, APF in the
+//! U-trap reports a stall instead of spinning forever.
+
+use mole_mapping::FrontierGrid;
+use mole_planning::{
+    LocalPlanner, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
+};
+use mole_sensing::RayCaster;
+use mole_types::{Grid, MODE_DONE, MODE_ESCAPE, MODE_STALLED, Scan, Square, Tactile};
+use mole_world::{Scenario, World, load_scenario};
+use std::path::Path;
+
+const DT: f64 = 0.05;
+const BEAMS: usize = 180;
+const RANGE_MAX: f64 = 4.0;
+
+fn scenario(name: &str) -> Scenario {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenarios")
+        .join(name);
+    let mut s = load_scenario(&path).unwrap_or_else(|e| panic!("{e}"));
+    s.dt = DT;
+    s
+}
+
+struct Run {
+    steps: usize,
+    reached: bool,
+    max_penetration: f64,
+    coverage: f64,
+    modes: Vec<u32>,
+    path_length: f64,
+}
+
+fn inside(obstacles: &[Square], x: f64, y: f64) -> bool {
+    obstacles.iter().any(|o| o.contains(x, y))
+}
+
+/// Fraction of the free cells reachable from the start (8-connected over cell centres outside
+/// every square) that the frontier grid marks explored.
+fn coverage(sc: &Scenario, cells: &[u8], w: usize, h: usize) -> f64 {
+    let res = sc.grid_resolution;
+    let free: Vec<bool> = (0..w * h)
+        .map(|i| {
+            let (x, y) = (((i % w) as f64 + 0.5) * res, ((i / w) as f64 + 0.5) * res);
+            !inside(&sc.obstacles, x, y)
+        })
+        .collect();
+    let start = (sc.start.y / res) as usize * w + (sc.start.x / res) as usize;
+    let mut seen = vec![false; w * h];
+    let mut stack = vec![start];
+    seen[start] = true;
+    let (mut total, mut explored) = (0usize, 0usize);
+    while let Some(c) = stack.pop() {
+        total += 1;
+        explored += (cells[c] != 0) as usize;
+        let (cx, cy) = ((c % w) as i64, (c / w) as i64);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (nx, ny) = (cx + dx, cy + dy);
+                if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                    continue;
+                }
+                let n = ny as usize * w + nx as usize;
+                if free[n] && !seen[n] {
+                    seen[n] = true;
+                    stack.push(n);
+                }
+            }
+        }
+    }
+    explored as f64 / total as f64
+}
+
+fn run(sc: &Scenario, planner: &mut dyn Planner, max_steps: usize, stop_at_goal: bool) -> Run {
+    let mut world = World::new(sc);
+    let caster = RayCaster::new(sc.arena_width, sc.arena_height, &sc.obstacles)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut fg = FrontierGrid::new(sc.arena_width, sc.arena_height, sc.grid_resolution)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut scan: Box<Scan> = bytemuck::zeroed_box();
+    let tactile: Box<Tactile> = bytemuck::zeroed_box();
+    let mut grid: Box<Grid> = bytemuck::zeroed_box();
+    let r = sc.robot.radius;
+    let mut out = Run {
+        steps: 0,
+        reached: false,
+        max_penetration: 0.0,
+        coverage: 0.0,
+        modes: Vec::new(),
+        path_length: 0.0,
+    };
+    for step in 0..max_steps {
+        let pose = world.pose();
+        scan.n_beams = BEAMS as u32;
+        scan.angle_min = -std::f32::consts::PI;
+        scan.angle_increment = std::f32::consts::TAU / BEAMS as f32;
+        scan.range_max = RANGE_MAX as f32;
+        for i in 0..BEAMS {
+            let a = pose.theta + scan.angle_min as f64 + i as f64 * scan.angle_increment as f64;
+            scan.ranges[i] = caster.cast(pose.x, pose.y, a, RANGE_MAX) as f32;
+        }
+        fg.integrate_footprint(pose, r);
+        fg.integrate_scan(pose, &scan);
+        fg.write(&mut grid);
+        let input = PlannerInput {
+            tick: step as u64,
+            dt: DT,
+            pose,
+            scan: Some(&scan),
+            tactile: Some(&tactile),
+            grid: Some(&grid),
+        };
+        let c = planner.step(&input);
+        if std::env::var("DEBUG_LOOP").is_ok() && step % 100 == 0 {
+            eprintln!(
+                "{step} pose {:.2} {:.2} {:.2} cmd {:.3} {:.3} mode {}",
+                pose.x, pose.y, pose.theta, c.v, c.omega, c.mode
+            );
+        }
+        out.modes.push(c.mode);
+        world.step(c.v, c.omega);
+        let p = world.pose();
+        out.path_length += (p.x - pose.x).hypot(p.y - pose.y);
+        out.max_penetration = out.max_penetration.max(world.penetration());
+        out.steps = step + 1;
+        if world.goal_reached() {
+            out.reached = true;
+            if stop_at_goal {
+                break;
+            }
+        }
+        if c.mode == MODE_DONE && !stop_at_goal {
+            break;
+        }
+    }
+    out.coverage = coverage(sc, grid.cells(), grid.width as usize, grid.height as usize);
+    out
+}
+
+fn build(sc: &Scenario, name: &str, goal: bool) -> Box<dyn Planner> {
+    let mut cfg = PlannerConfig::new(name);
+    cfg.seed = 7;
+    cfg.local = LocalPlanner::Dwa;
+    if goal {
+        cfg.goal = sc.goal.map(|g| (g.x, g.y));
+    }
+    build_planner(&cfg, RobotLimits::from(&sc.robot)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn dwa_reaches_the_cluttered_goal_without_penetration() {
+    let sc = scenario("cluttered.toml");
+    let mut p = build(&sc, "dwa", true);
+    let o = run(&sc, p.as_mut(), 4000, true);
+    eprintln!(
+        "dwa cluttered: reached {} in {} steps ({:.1} s), path {:.2} m, max penetration {:.4} m, bounces {}",
+        o.reached,
+        o.steps,
+        o.steps as f64 * DT,
+        o.path_length,
+        o.max_penetration,
+        p.bounces()
+    );
+    assert!(o.reached, "goal not reached in {} steps", o.steps);
+    assert!(o.max_penetration < 0.01, "{}", o.max_penetration);
+}
+
+#[test]
+fn frontier_exploration_covers_the_maze() {
+    let sc = scenario("maze.toml");
+    let mut p = build(&sc, "frontier", false);
+    let o = run(&sc, p.as_mut(), 12_000, false);
+    eprintln!(
+        "frontier maze: coverage {:.3} after {} steps ({:.0} s), path {:.1} m, done {}, penetration {:.4}",
+        o.coverage,
+        o.steps,
+        o.steps as f64 * DT,
+        o.path_length,
+        o.modes.last() == Some(&MODE_DONE),
+        o.max_penetration
+    );
+    assert!(o.coverage >= 0.95, "coverage {}", o.coverage);
+}
+
+#[test]
+fn apf_in_the_u_trap_reports_a_stall_and_does_not_spin_forever() {
+    let sc = scenario("u_trap.toml");
+    let mut p = build(&sc, "apf", true);
+    let o = run(&sc, p.as_mut(), 3000, true);
+    let stalled = o.modes.contains(&MODE_STALLED);
+    let escaped = o.modes.contains(&MODE_ESCAPE);
+    eprintln!(
+        "apf u_trap: stalled {stalled}, escaped {escaped}, reached {} in {} steps, path {:.1} m",
+        o.reached, o.steps, o.path_length
+    );
+    assert!(stalled && escaped);
+    assert!(o.path_length > 3.0, "kept moving");
+}
+
+/// The A* path (optimistic through unexplored cells) gets the DWA out of the U-trap and through
+/// the maze it has never seen, as well as along the corridor and across the open field.
+#[test]
+fn dwa_with_a_global_path_reaches_every_scenario_goal() {
+    for name in ["open.toml", "corridor.toml", "u_trap.toml", "maze.toml"] {
+        let sc = scenario(name);
+        assert!(sc.goal.is_some(), "{name} has no goal");
+        let mut p = build(&sc, "dwa", true);
+        let o = run(&sc, p.as_mut(), 6000, true);
+        eprintln!(
+            "dwa {name}: reached {} in {} steps ({:.1} s), path {:.1} m, penetration {:.4} m, bounces {}",
+            o.reached,
+            o.steps,
+            o.steps as f64 * DT,
+            o.path_length,
+            o.max_penetration,
+            p.bounces()
+        );
+        assert!(o.reached, "{name}: goal not reached in {} steps", o.steps);
+        assert!(o.max_penetration < 0.01, "{name}: {}", o.max_penetration);
+    }
+}

@@ -1,0 +1,137 @@
+//! Every planner's step allocates nothing in steady state (a counting global allocator).
+
+use mole_planning::{
+    LocalPlanner, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
+};
+use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid, Pose2, Scan};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+struct Counting;
+
+static COUNT: AtomicU64 = AtomicU64::new(0);
+static ON: AtomicBool = AtomicBool::new(false);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if ON.load(Ordering::Relaxed) {
+            COUNT.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if ON.load(Ordering::Relaxed) {
+            COUNT.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn limits() -> RobotLimits {
+    RobotLimits {
+        radius: 0.2,
+        max_speed: 0.5,
+        max_omega: 2.0,
+        max_accel: 2.0,
+        max_alpha: 8.0,
+    }
+}
+
+/// A 10 m × 10 m map at 0.05 m: walls, a box, the right half unexplored; a full-circle scan.
+fn world() -> (Box<Grid>, Box<Scan>) {
+    let mut g: Box<Grid> = bytemuck::zeroed_box();
+    let (w, h) = (200usize, 200usize);
+    g.width = w as u32;
+    g.height = h as u32;
+    g.resolution = 0.05;
+    for r in 0..h {
+        for c in 0..w {
+            let border = r == 0 || c == 0 || r == h - 1 || c == w - 1;
+            let boxed = (80..90).contains(&c) && (40..60).contains(&r);
+            g.cells[r * w + c] = if border || boxed {
+                CELL_OCCUPIED
+            } else if c > 120 {
+                CELL_UNEXPLORED
+            } else {
+                CELL_FREE
+            };
+        }
+    }
+    let mut s: Box<Scan> = bytemuck::zeroed_box();
+    s.n_beams = 360;
+    s.angle_min = -std::f32::consts::PI;
+    s.angle_increment = std::f32::consts::TAU / 360.0;
+    s.range_max = 4.0;
+    for i in 0..360 {
+        s.ranges[i] = 1.5 + (i % 7) as f32 * 0.3;
+    }
+    (g, s)
+}
+
+#[test]
+fn every_planner_step_allocates_nothing_in_steady_state() {
+    let (grid, scan) = world();
+    for (name, local) in [
+        ("random-walk", LocalPlanner::Dwa),
+        ("apf", LocalPlanner::Dwa),
+        ("dwa", LocalPlanner::Dwa),
+        ("frontier", LocalPlanner::Dwa),
+        ("frontier", LocalPlanner::Apf),
+        // `dwa` re-planning with APF after a bounce (`local` names the re-planner here).
+        ("dwa-replan-apf", LocalPlanner::Apf),
+    ] {
+        let (name, replan) = match name.strip_suffix("-replan-apf") {
+            Some(n) => (n, true),
+            None => (name, false),
+        };
+        let mut cfg = PlannerConfig::new(name);
+        if replan {
+            cfg.replan_with = Some(local);
+            cfg.replan_time = 1.0;
+        }
+        cfg.goal = Some((8.0, 8.0));
+        cfg.local = local;
+        cfg.frontier.reselect_every = 5; // select often, so selection runs inside the window
+        let mut p = build_planner(&cfg, limits()).unwrap_or_else(|e| panic!("{e}"));
+        let mut pose = Pose2::new(2.0, 2.0, 0.3);
+        let mut status: Box<mole_types::PlanStatus> = bytemuck::zeroed_box();
+        let mut step = |p: &mut Box<dyn Planner>, tick: u64, pose: &mut Pose2| {
+            let input = PlannerInput {
+                tick,
+                dt: 0.05,
+                pose: *pose,
+                scan: Some(&scan),
+                tactile: None,
+                grid: Some(&grid),
+            };
+            let c = p.step(&input);
+            p.write_status(&mut status);
+            pose.x += c.v * pose.theta.cos() * 0.05;
+            pose.y += c.v * pose.theta.sin() * 0.05;
+            pose.theta += c.omega * 0.05;
+        };
+        for tick in 0..50 {
+            step(&mut p, tick, &mut pose);
+        }
+        COUNT.store(0, Ordering::SeqCst);
+        ON.store(true, Ordering::SeqCst);
+        for tick in 50..150 {
+            if replan && tick % 40 == 0 {
+                p.replan();
+            }
+            step(&mut p, tick, &mut pose);
+        }
+        ON.store(false, Ordering::SeqCst);
+        let n = COUNT.load(Ordering::SeqCst);
+        assert_eq!(n, 0, "{name} ({local:?}) allocated {n} times in 100 steps");
+    }
+}
