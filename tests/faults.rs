@@ -104,6 +104,9 @@ fn random_bytes_on_every_topic_crash_nothing_and_are_counted() {
         &mut garbage,
         n,
     );
+    // Stay connected while the stack reads the garbage: a publisher that leaves takes its
+    // unread samples with it.
+    std::thread::sleep(Duration::from_millis(1500));
     drop(rogue);
 
     let out = stack.out.clone();
@@ -132,5 +135,150 @@ fn random_bytes_on_every_topic_crash_nothing_and_are_counted() {
             .as_u64()
             .is_some_and(|n| n > 0),
         "{summary:#}"
+    );
+}
+
+fn pid_of(namespace: &str, program: &str) -> Option<u32> {
+    // The kernel keeps the first 15 bytes of a program's name in `comm`.
+    let comm = &program[..program.len().min(15)];
+    processes_of(namespace).into_iter().find(|pid| {
+        std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim() == comm)
+    })
+}
+
+/// Waits until `program` runs in `namespace` with a pid other than `old`.
+fn wait_for_new_pid(
+    namespace: &str,
+    program: &str,
+    old: Option<u32>,
+    timeout: Duration,
+    out: &std::path::Path,
+) -> u32 {
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        if let Some(pid) = pid_of(namespace, program).filter(|p| Some(*p) != old) {
+            return pid;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{program} did not come back within {timeout:?}\n{}",
+            logs(out)
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn signal(pid: u32, signal: nix::sys::signal::Signal) {
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), signal).expect("signal");
+}
+
+#[test]
+fn every_role_killed_in_turn_is_restarted_within_a_second_and_the_run_completes() {
+    let _serial = serial();
+    let stack = Stack::start("kill-each", &["--mode", "realtime", "--ticks", "2500"]);
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    for role in ["sensing", "localization", "mapping", "planning", "monitor"] {
+        std::thread::sleep(Duration::from_millis(1200));
+        let program = format!("mole-{role}");
+        let old = pid_of(&stack.namespace, &program).unwrap_or_else(|| panic!("{program} runs"));
+        signal(old, nix::sys::signal::Signal::SIGKILL);
+        let killed = std::time::Instant::now();
+        wait_for_new_pid(
+            &stack.namespace,
+            &program,
+            Some(old),
+            Duration::from_secs(1),
+            &stack.out,
+        );
+        assert!(
+            killed.elapsed() <= Duration::from_secs(1),
+            "{role} restarted after {:?}",
+            killed.elapsed()
+        );
+    }
+    let out = stack.out.clone();
+    let keep = out.with_extension("kept");
+    let output = stack.wait_and_copy(&keep, Duration::from_secs(240));
+    let logs = logs(&keep);
+    let summary = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    assert!(output.status.success(), "{logs}");
+    assert_eq!(summary["exit_reason"], "ticks", "{summary:#}");
+    for role in ["sensing", "localization", "mapping", "planning", "monitor"] {
+        assert_eq!(summary["restarts"][role], 1, "{role}: {summary:#}");
+    }
+}
+
+#[test]
+fn a_hung_process_is_detected_by_its_silence_and_restarted() {
+    let _serial = serial();
+    let stack = Stack::start("hang", &["--mode", "realtime", "--ticks", "100000"]);
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(1000));
+    let frozen = pid_of(&stack.namespace, "mole-mapping").expect("mapping runs");
+    // Alive but doing nothing: SIGSTOP.
+    signal(frozen, nix::sys::signal::Signal::SIGSTOP);
+    wait_for_new_pid(
+        &stack.namespace,
+        "mole-mapping",
+        Some(frozen),
+        Duration::from_secs(15),
+        &stack.out,
+    );
+    stack.wait_for_log("mapping", "restart 1", Duration::from_secs(5));
+    std::thread::sleep(Duration::from_millis(500));
+    signal(stack.pid(), nix::sys::signal::Signal::SIGINT);
+    let out = stack.out.clone();
+    let keep = out.with_extension("kept");
+    let output = stack.wait_and_copy(&keep, Duration::from_secs(60));
+    let summary = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    let launcher_log = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(
+        launcher_log.contains("hung"),
+        "the launcher reports the hang:\n{launcher_log}"
+    );
+    assert_eq!(summary["hangs"]["mapping"], 1, "{summary:#}");
+    assert_eq!(summary["restarts"]["mapping"], 1, "{summary:#}");
+}
+
+#[test]
+fn after_the_whole_stack_is_killed_a_new_one_starts_in_the_same_namespace_and_cleans_up() {
+    let _serial = serial();
+    let before = shm_files();
+    let stack = Stack::start("killall", &["--mode", "realtime", "--ticks", "100000"]);
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(800));
+    let namespace = stack.namespace.clone();
+    // The launcher first: its children must not outlive it (they get SIGTERM from the kernel).
+    signal(stack.pid(), nix::sys::signal::Signal::SIGKILL);
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    while processes_of(&namespace).iter().any(|p| *p != stack.pid())
+        && std::time::Instant::now() < deadline
+    {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Whatever is left, SIGKILL too: the hardest stop there is, leaving stale resources.
+    for pid in processes_of(&namespace) {
+        signal(pid, nix::sys::signal::Signal::SIGKILL);
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let out = std::env::temp_dir().join(format!("mole-{namespace}-again"));
+    let output = mole_command(&namespace, &out, &["--mode", "lockstep", "--ticks", "300"])
+        .output()
+        .expect("run");
+    let logs = logs(&out);
+    let _ = std::fs::remove_dir_all(&out);
+    drop(stack);
+    assert!(
+        output.status.success(),
+        "{}\n{logs}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(processes_of(&namespace).is_empty());
+    assert_eq!(
+        shm_files(),
+        before,
+        "stale resources of the killed stack were cleaned"
     );
 }

@@ -255,3 +255,52 @@ fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
     assert_eq!(summary_a["path_length_m"], summary_b["path_length_m"]);
     assert_eq!(summary_a["topics"]["world/truth"]["dropped"], 0);
 }
+
+/// Position RMSE bounds per estimator on 1500 lockstep steps of the default scenario: a quarter
+/// of the robot radius (5 cm) for the filters that fuse beacons, which keeps the maps they
+/// build within one grid cell; the KF sees only the position fix every second, so it gets 12 cm.
+#[test]
+fn every_estimator_localizes_within_its_bound() {
+    let _serial = serial();
+    for (estimator, bound) in [("ekf", 0.05), ("pf", 0.05), ("bayes", 0.08), ("kf", 0.12)] {
+        let stack = Stack::start(
+            &format!("est-{estimator}"),
+            &[
+                "--mode",
+                "lockstep",
+                "--ticks",
+                "1500",
+                "--seed",
+                "3",
+                "--estimator",
+                estimator,
+            ],
+        );
+        let out = stack.out.clone();
+        let (output, logs, summary) = stack_wait_keep(stack, &out);
+        assert!(output.status.success(), "{estimator}: {logs}");
+        assert_eq!(summary["estimator"], estimator);
+        let rmse = f64_of(&summary, "localization_rmse_m");
+        assert!(rmse < bound, "{estimator}: RMSE {rmse} m ≥ {bound} m");
+        assert!(f64_of(&summary, "mean_nees").is_finite(), "{estimator}");
+    }
+}
+
+#[test]
+fn a_process_that_refuses_its_input_fails_the_run_with_exit_2_without_restarts() {
+    let _serial = serial();
+    // dwa needs a goal; the default scenario has none.
+    let stack = Stack::start(
+        "no-goal",
+        &["--mode", "lockstep", "--ticks", "100", "--planner", "dwa"],
+    );
+    let out = stack.out.clone();
+    let (output, logs, _) = stack_wait_keep(stack, &out);
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{err}\n{logs}");
+    assert!(err.contains("planning") && err.contains("--goal"), "{err}");
+    assert!(
+        !logs.contains("restart"),
+        "bad input is not retried:\n{logs}"
+    );
+}

@@ -468,19 +468,28 @@ fn start(spec: &ChildSpec, attempt: u32) -> Result<Child, LaunchError> {
     )
     .map_err(log_err)?;
     let stderr = log.try_clone().map_err(log_err)?;
-    Command::new(&spec.program)
+    let mut command = Command::new(&spec.program);
+    command
         .args(&spec.args)
         .envs(spec.env.iter().map(|(k, v)| (k, v)))
         .stdin(Stdio::null())
         .stdout(log)
         .stderr(stderr)
-        .process_group(0)
-        .spawn()
-        .map_err(|source| LaunchError::Spawn {
-            role: spec.role.clone(),
-            program: spec.program.clone(),
-            source,
-        })
+        .process_group(0);
+    // SAFETY: between fork and exec only async-signal-safe work happens: one prctl(2) call.
+    // If the launcher dies, even by SIGKILL, its children get SIGTERM instead of running on
+    // as orphans that keep the namespace busy.
+    unsafe {
+        std::os::unix::process::CommandExt::pre_exec(&mut command, || {
+            nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
+                .map_err(std::io::Error::from)
+        });
+    }
+    command.spawn().map_err(|source| LaunchError::Spawn {
+        role: spec.role.clone(),
+        program: spec.program.clone(),
+        source,
+    })
 }
 
 /// Finds a process's program: a command with a `/` is a path (relative to the current

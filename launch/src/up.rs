@@ -1,5 +1,6 @@
 //! `mole up`: start the stack, supervise it, wait for the end, and complete the summary.
 
+use crate::RestartWhen;
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::{
@@ -21,6 +22,8 @@ use std::time::{Duration, Instant};
 const READY_TIMEOUT: Duration = Duration::from_secs(20);
 /// How long the monitor may take to write its files once the world has finished.
 const FINISH_TIMEOUT: Duration = Duration::from_secs(30);
+/// A ready process that publishes no statistics for this long is hung: alive but not serving.
+const HANG_TIMEOUT: Duration = Duration::from_secs(5);
 /// The launcher's wake-up period (supervision and progress).
 const POLL: Duration = Duration::from_millis(50);
 
@@ -248,6 +251,8 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     let mut collector = StatsCollector::default();
     let mut gave_up: BTreeSet<String> = BTreeSet::new();
     let mut last_report = Instant::now();
+    let mut last_heard: BTreeMap<String, Instant> = BTreeMap::new();
+    let mut hangs: BTreeMap<String, u32> = BTreeMap::new();
 
     let env = child_env(args, &launch, &scenario_path, ticks, seed);
     let order = start_order(&launch.processes).map_err(|e| Failure::input(e.to_string()))?;
@@ -283,9 +288,32 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     while exit_reason.is_none() {
         std::thread::sleep(POLL);
         stats_sub.drain(|s| {
-            ready.insert(read_name(&s.process).into_owned());
+            let role = read_name(&s.process).into_owned();
+            last_heard.insert(role.clone(), Instant::now());
+            ready.insert(role);
             collector.record(s);
         });
+        for role in hung_roles(&launch, &supervisor, &mut last_heard) {
+            *hangs.entry(role.clone()).or_insert(0) += 1;
+            let policy = launch.process(&role).map(|p| p.restart.policy);
+            if policy.is_some_and(|p| p != RestartWhen::Never)
+                && let Some(pid) = supervisor.pid(&role)
+            {
+                progress.suspend(|| {
+                    tracing::warn!(
+                        role,
+                        "no statistics for {HANG_TIMEOUT:?}: hung, killing it for a restart"
+                    )
+                });
+                let _ = nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(pid as i32),
+                    nix::sys::signal::Signal::SIGKILL,
+                );
+            } else {
+                progress
+                    .suspend(|| tracing::warn!(role, "no statistics for {HANG_TIMEOUT:?}: hung"));
+            }
+        }
         if last_report.elapsed() >= Duration::from_secs(1) {
             last_report = Instant::now();
             publish_processes(&mut processes_pub, &launch, &supervisor, &gave_up);
@@ -318,6 +346,8 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
                         progress.suspend(
                             || tracing::warn!(role, %status, "process exited unexpectedly"),
                         );
+                        // Release what the dead process held before its successor starts.
+                        cleanup_dead_nodes();
                     }
                 }
                 SupervisorEvent::Restarted { role, attempt } => {
@@ -383,9 +413,16 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     let restarts = supervisor.restarts();
     let summary_path = args.out.join("summary.json");
     let reason = exit_reason.flatten();
+    if !summary_path.exists()
+        && let Some(failure) = failure
+    {
+        // The run failed before the monitor could write anything: the failure is the news.
+        return Err(failure);
+    }
     finish_summary(
         &summary_path,
         &restarts,
+        &hangs,
         reason,
         started.elapsed().as_secs_f64(),
     )?;
@@ -397,6 +434,27 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
             stats: collector,
         }),
     }
+}
+
+/// Roles that are running, were heard from, and have been silent for [`HANG_TIMEOUT`]; each is
+/// reported once per silence.
+fn hung_roles(
+    launch: &LaunchFile,
+    supervisor: &Supervisor,
+    last_heard: &mut BTreeMap<String, Instant>,
+) -> Vec<String> {
+    let mut hung = Vec::new();
+    for process in &launch.processes {
+        let role = &process.role;
+        if let Some(heard) = last_heard.get(role)
+            && heard.elapsed() > HANG_TIMEOUT
+            && supervisor.is_running(role)
+        {
+            hung.push(role.clone());
+            last_heard.remove(role);
+        }
+    }
+    hung
 }
 
 /// The last `error:` line of a process log (or where the log is).
@@ -474,6 +532,10 @@ fn child_env(
         ),
     ];
     env.push(("MOLE_SEED".to_string(), seed.to_string()));
+    // Exploring planners ignore the scenario's goal, so passing it must not end their run.
+    if matches!(launch.stack.planner.as_str(), "random-walk" | "frontier") {
+        env.push(("MOLE_NO_STOP_AT_GOAL".to_string(), "true".to_string()));
+    }
     if let Some((x, y)) = args.goal {
         env.push(("MOLE_GOAL".to_string(), format!("{x},{y}")));
     }
@@ -556,6 +618,7 @@ fn progress_bar(ticks: u64, quiet: bool) -> ProgressBar {
 fn finish_summary(
     path: &Path,
     restarts: &BTreeMap<String, u32>,
+    hangs: &BTreeMap<String, u32>,
     reason: Option<&str>,
     launcher_wall_s: f64,
 ) -> Result<(), Failure> {
@@ -568,6 +631,10 @@ fn finish_summary(
     let mut summary: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| Failure::run(format!("{} is not valid JSON: {e}", path.display())))?;
     if let Some(object) = summary.as_object_mut() {
+        object.insert(
+            "hangs".into(),
+            serde_json::to_value(hangs).unwrap_or_default(),
+        );
         object.insert(
             "restarts".into(),
             serde_json::to_value(restarts).unwrap_or_default(),

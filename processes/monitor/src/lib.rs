@@ -112,6 +112,9 @@ pub(crate) struct Scene {
     pub squares: Vec<Square>,
 }
 
+/// Coverage fractions whose first step the summary reports (`coverage_steps`).
+pub const COVERAGE_MILESTONES: [f64; 3] = [0.5, 0.9, 0.95];
+
 /// The observer: ground truth from `world/map`, fed every other message as it arrives.
 pub struct Monitor {
     scene: Scene,
@@ -119,6 +122,8 @@ pub struct Monitor {
 
     grid: LatestGrid,
     explored_reachable: u64,
+    /// Step at which coverage first reached each of [`COVERAGE_MILESTONES`].
+    coverage_steps: [Option<u64>; 3],
     iou_intersection: u64,
     iou_union: u64,
     contact: LatestGrid,
@@ -188,6 +193,7 @@ impl Monitor {
                 received: false,
             },
             explored_reachable: 0,
+            coverage_steps: [None; 3],
             iou_intersection: 0,
             iou_union: 0,
             contact: LatestGrid {
@@ -343,8 +349,9 @@ impl Monitor {
         }
     }
 
-    /// Takes a frontier grid (kind `GRID_FRONTIER`): keeps its cells and updates coverage and
-    /// IoU. A grid of another kind, size, resolution or origin is ignored and counted.
+    /// Takes a frontier grid (kind `GRID_FRONTIER`): keeps its cells, updates coverage and IoU,
+    /// and records the step at which coverage first reached each of [`COVERAGE_MILESTONES`]. A
+    /// grid of another kind, size, resolution or origin is ignored and counted.
     pub fn on_grid(&mut self, grid: &Grid) {
         if grid.kind != GRID_FRONTIER || !self.accept(grid, false) {
             self.ignored_messages += 1;
@@ -367,6 +374,12 @@ impl Monitor {
         self.explored_reachable = explored_reachable;
         self.iou_intersection = intersection;
         self.iou_union = union;
+        let coverage = self.coverage();
+        for (milestone, threshold) in self.coverage_steps.iter_mut().zip(COVERAGE_MILESTONES) {
+            if milestone.is_none() && coverage >= threshold {
+                *milestone = Some(grid.header.tick);
+            }
+        }
     }
 
     /// Takes a contact grid (kind `GRID_CONTACT`): keeps its cells and updates the precision.
@@ -604,6 +617,11 @@ impl Monitor {
             grid_hash: hash(&self.grid),
             contact_hash: hash(&self.contact),
             reachable_free_cells: self.raster.reachable_free,
+            coverage_steps: COVERAGE_MILESTONES
+                .iter()
+                .zip(self.coverage_steps)
+                .map(|(t, step)| (t.to_string(), step))
+                .collect(),
             end_reason: self
                 .ended
                 .then(|| end_reason_name(self.end_reason).to_owned()),

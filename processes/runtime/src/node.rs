@@ -76,6 +76,7 @@ pub fn init_tracing(role: &str) {
 /// never block a new one. Returns how many nodes were cleaned.
 pub fn cleanup_dead_nodes() -> usize {
     let mut cleaned = 0;
+    let mut failed = 0;
     let result = Node::<ipc::Service>::list(Config::global_config(), |state| {
         if let NodeState::Dead(view) = state {
             let name = view.details().as_ref().map(|d| d.name().to_string());
@@ -84,13 +85,22 @@ pub fn cleanup_dead_nodes() -> usize {
                     cleaned += 1;
                     tracing::info!(node = ?name, "cleaned the resources of a dead node");
                 }
-                Err(e) => tracing::warn!(node = ?name, "cannot clean a dead node: {e:?}"),
+                Err(e) => {
+                    failed += 1;
+                    tracing::debug!(node = ?name, "cannot clean a dead node: {e:?}");
+                }
             }
         }
         CallbackProgression::Continue
     });
     if let Err(e) = result {
         tracing::warn!("cannot list nodes: {e:?}");
+    }
+    if failed > 0 {
+        tracing::warn!(
+            failed,
+            "dead nodes whose resources iceoryx2 could not clean (RUST_LOG=debug names them)"
+        );
     }
     cleaned
 }

@@ -146,7 +146,6 @@ impl<M: Message> Subscriber<M> {
         }
     }
 
-
     fn next_valid(&mut self) -> Option<Sample<ipc::Service, M, ()>> {
         loop {
             let sample = match self.subscriber.receive() {
