@@ -14,7 +14,7 @@ mod truth;
 pub use summary::{LatencyUs, RunMeta, Summary, TopicSummary, UpdateUs, fnv1a64, write_summary};
 
 use hdrhistogram::Histogram;
-use mole_types::{
+use mole_types::{MODE_STALLED, 
     CELL_FREE, CELL_OCCUPIED, DIRECTION_SUBSCRIBE, END_EXPLORATION_COMPLETE, END_GOAL_REACHED,
     END_STOPPED, END_TICKS, GRID_CONTACT, GRID_FRONTIER, Grid, Invalid, MAX_PARTICLES, MAX_PATH,
     MAX_TOPIC_STATS, Message, NAME_LEN, Particles, PlanStatus, Pose, RunStatus,
@@ -159,6 +159,8 @@ pub struct Monitor {
     stats: Vec<ProcessStats>,
 
     plan_mode: u32,
+    /// Times the planner reported a stall (MODE_STALLED).
+    stalls: u32,
     bounces: u32,
     exploration_complete: bool,
     plan_path: Vec<[f32; 2]>,
@@ -227,6 +229,7 @@ impl Monitor {
             particles: Vec::with_capacity(MAX_PARTICLES),
             stats: Vec::with_capacity(MAX_PROCESSES),
             plan_mode: 0,
+            stalls: 0,
             bounces: 0,
             exploration_complete: false,
             plan_path: Vec::with_capacity(MAX_PATH),
@@ -476,6 +479,10 @@ impl Monitor {
 
     /// Keeps the planner's mode, bounce count, exploration-complete flag and path.
     pub fn on_plan_status(&mut self, s: &PlanStatus) {
+        // A local minimum the planner reported (seed §1 APF): count each entry into the mode.
+        if s.mode == MODE_STALLED && self.plan_mode != MODE_STALLED {
+            self.stalls += 1;
+        }
         self.plan_mode = s.mode;
         self.bounces = s.bounces;
         self.exploration_complete |= s.flags & STATUS_EXPLORATION_COMPLETE != 0;
@@ -614,6 +621,7 @@ impl Monitor {
                 p99: quantile_us(&self.update_ns, 0.99),
             },
             bounces: self.bounces,
+            stalls: self.stalls,
             grid_hash: hash(&self.grid),
             contact_hash: hash(&self.contact),
             reachable_free_cells: self.raster.reachable_free,

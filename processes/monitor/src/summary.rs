@@ -84,6 +84,8 @@ pub struct Summary {
     pub mean_nees: Option<f64>,
     pub estimator_update_us: UpdateUs,
     pub bounces: u32,
+    /// Times the planner reported a stall in a local minimum.
+    pub stalls: u32,
     /// FNV-1a 64 of the final frontier grid's cells, 16 hex digits.
     pub grid_hash: Option<String>,
     /// FNV-1a 64 of the final contact grid's cells, 16 hex digits.

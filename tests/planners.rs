@@ -1,0 +1,105 @@
+//! The planners in the whole stack, lockstep: DWA reaches a goal through clutter, frontier
+//! exploration covers the maze, APF reports the U-trap's local minimum and keeps moving.
+
+use mole_integration_tests::*;
+use std::time::Duration;
+
+fn run(test: &str, args: &[&str]) -> serde_json::Value {
+    let _serial = serial();
+    let stack = Stack::start(test, args);
+    let out = stack.out.clone();
+    let keep = out.with_extension("kept");
+    let output = stack.wait_and_copy(&keep, Duration::from_secs(600));
+    let logs = logs(&keep);
+    let summary = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    assert!(
+        output.status.success(),
+        "{}\n{logs}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    summary
+}
+
+#[test]
+fn dwa_reaches_the_goal_in_the_cluttered_field_without_touching_anything() {
+    let s = run(
+        "dwa",
+        &[
+            "--mode",
+            "lockstep",
+            "--seed",
+            "1",
+            "--planner",
+            "dwa",
+            "--scenario",
+            "scenarios/cluttered.toml",
+            "--ticks",
+            "9000",
+        ],
+    );
+    assert_eq!(s["goal_reached"], true, "{s:#}");
+    assert_eq!(s["exit_reason"], "goal_reached");
+    assert!(
+        s["max_penetration_m"].as_f64().is_some_and(|p| p <= 0.001),
+        "{s:#}"
+    );
+}
+
+#[test]
+fn frontier_exploration_covers_the_maze() {
+    let s = run(
+        "frontier",
+        &[
+            "--mode",
+            "lockstep",
+            "--seed",
+            "1",
+            "--planner",
+            "frontier",
+            "--scenario",
+            "scenarios/maze.toml",
+            "--ticks",
+            "25000",
+        ],
+    );
+    let coverage = s["coverage"].as_f64().unwrap_or(0.0);
+    assert!(coverage >= 0.95, "coverage {coverage}: {s:#}");
+    assert!(s["coverage_steps"]["0.95"].as_u64().is_some(), "{s:#}");
+    assert!(
+        s["max_penetration_m"].as_f64().is_some_and(|p| p <= 0.001),
+        "{s:#}"
+    );
+}
+
+#[test]
+fn apf_in_the_u_trap_reports_a_stall_and_does_not_spin_forever() {
+    let s = run(
+        "apf",
+        &[
+            "--mode",
+            "lockstep",
+            "--seed",
+            "1",
+            "--planner",
+            "apf",
+            "--scenario",
+            "scenarios/u_trap.toml",
+            "--ticks",
+            "3000",
+        ],
+    );
+    assert!(
+        s["stalls"].as_u64().is_some_and(|n| n >= 1),
+        "the local minimum is reported: {s:#}"
+    );
+    // Escaping means moving on: metres of travel, not a robot turning on the spot.
+    assert!(
+        s["path_length_m"].as_f64().is_some_and(|l| l > 3.0),
+        "{s:#}"
+    );
+    assert!(
+        s["max_penetration_m"].as_f64().is_some_and(|p| p <= 0.001),
+        "{s:#}"
+    );
+}
