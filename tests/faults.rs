@@ -3,6 +3,7 @@
 use mole_integration_tests::*;
 use mole_runtime::{ClockMode, CommonArgs, Context, Publisher};
 use mole_types::{Message, topics};
+use std::os::unix::process::CommandExt;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -253,4 +254,56 @@ fn after_the_whole_stack_is_killed_a_new_one_starts_in_the_same_namespace_and_cl
         before,
         "stale resources of the killed stack were cleaned"
     );
+}
+
+#[test]
+fn the_stacks_shared_memory_belongs_to_its_user_alone() {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let _serial = serial();
+    let before = shm_files();
+    let stack = Stack::start("owner", &["--mode", "realtime", "--ticks", "100000"]);
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    let uid = nix::unistd::getuid().as_raw();
+    // Shared memory and service records (iceoryx2's node directories are 0750, its default).
+    let ours: Vec<String> = shm_files()
+        .into_iter()
+        .filter(|f| !before.contains(f) && !f.starts_with("/tmp/iceoryx2/nodes"))
+        .collect();
+    assert!(!ours.is_empty(), "the stack created shared memory");
+    for file in &ours {
+        let meta = std::fs::metadata(file).expect("stat");
+        assert_eq!(
+            meta.uid(),
+            uid,
+            "{file} belongs to the user who started the stack"
+        );
+        assert_eq!(
+            meta.permissions().mode() & 0o077,
+            0,
+            "{file} is closed to group and others"
+        );
+    }
+    if !nix::unistd::getuid().is_root() {
+        eprintln!("skipped the other-user check: switching users needs root");
+        return;
+    }
+    // Another user (nobody) cannot see or open the stack's services.
+    let nobody = 65534;
+    let output = std::process::Command::new(bin_dir().join("mole"))
+        .args(["top", "--namespace", &stack.namespace, "--once"])
+        .uid(nobody)
+        .gid(nobody)
+        .env_remove("CARGO")
+        .output();
+    match output {
+        Ok(output) => {
+            assert!(
+                !output.status.success(),
+                "user nobody attached to the stack:\n{}",
+                String::from_utf8_lossy(&output.stdout)
+            );
+        }
+        // The binary itself is out of nobody's reach (a private build directory): also closed.
+        Err(e) => eprintln!("user nobody cannot even run mole here: {e}"),
+    }
 }
