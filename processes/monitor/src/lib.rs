@@ -14,10 +14,10 @@ mod truth;
 pub use summary::{LatencyUs, RunMeta, Summary, TopicSummary, UpdateUs, fnv1a64, write_summary};
 
 use hdrhistogram::Histogram;
-use mole_types::{MODE_STALLED, 
+use mole_types::{
     CELL_FREE, CELL_OCCUPIED, DIRECTION_SUBSCRIBE, END_EXPLORATION_COMPLETE, END_GOAL_REACHED,
     END_STOPPED, END_TICKS, GRID_CONTACT, GRID_FRONTIER, Grid, Invalid, MAX_PARTICLES, MAX_PATH,
-    MAX_TOPIC_STATS, Message, NAME_LEN, Particles, PlanStatus, Pose, RunStatus,
+    MAX_TOPIC_STATS, MODE_STALLED, Message, NAME_LEN, Particles, PlanStatus, Pose, RunStatus,
     STATUS_EXPLORATION_COMPLETE, Square, Stats, TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, TopicStats,
     Truth, WorldMap, read_name, wrap_angle,
 };
