@@ -283,3 +283,24 @@ fn copy_dir(from: &Path, to: &Path) {
         }
     }
 }
+
+/// What every process binary's command line must do: `--help` names the flags every process
+/// shares, and a bad `--mode` exits 2 naming the value it refused.
+pub fn check_process_cli(bin: &str) {
+    let output = Command::new(bin)
+        .arg("--help")
+        .output()
+        .expect("run the process");
+    assert!(output.status.success(), "{bin} --help failed");
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        text.contains("--namespace") && text.contains("--mode"),
+        "{text}"
+    );
+    let output = Command::new(bin)
+        .args(["--mode", "warp"])
+        .output()
+        .expect("run the process");
+    assert_eq!(output.status.code(), Some(2), "{bin} --mode warp");
+    assert!(String::from_utf8_lossy(&output.stderr).contains("warp"));
+}
