@@ -30,13 +30,7 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    match run(&args, kind) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e}");
-            ExitCode::FAILURE
-        }
-    }
+    mole_runtime::exit_code(run(&args, kind))
 }
 
 fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error>> {

@@ -37,13 +37,7 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e}");
-            ExitCode::FAILURE
-        }
-    }
+    mole_runtime::exit_code(run(&args))
 }
 
 fn end_reason(code: u32) -> &'static str {

@@ -46,23 +46,8 @@ fn main() -> ExitCode {
         );
         return ExitCode::from(2);
     }
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) if e.is::<BadInput>() => {
-            eprintln!("error: {e}");
-            ExitCode::from(2)
-        }
-        Err(e) => {
-            tracing::error!("{e}");
-            ExitCode::FAILURE
-        }
-    }
+    mole_runtime::exit_code(run(&args))
 }
-
-/// A configuration the planner refuses (a goal-seeking planner without a goal).
-#[derive(Debug, thiserror::Error)]
-#[error(transparent)]
-struct BadInput(mole_planning::PlanningError);
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("planning", &args.common)?;
@@ -104,7 +89,10 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                 .goal
                 .or((map.has_goal == 1).then_some((map.goal_x, map.goal_y)));
             // A planner that cannot be built is bad input (exit 2), not a crash to retry.
-            planner = Some(build_planner(&config, limits).map_err(BadInput)?);
+            planner = Some(
+                build_planner(&config, limits)
+                    .map_err(|e| mole_runtime::BadInput(e.to_string()))?,
+            );
             tracing::info!(planner = %args.planner, "map received");
         }
         let Some(planner) = planner.as_mut() else {

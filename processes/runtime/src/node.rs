@@ -50,6 +50,28 @@ pub struct CommonArgs {
     pub seed: Option<u64>,
 }
 
+/// Input a process refuses (a goal-seeking planner without a goal...): exit code 2, which no
+/// restart policy retries.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct BadInput(pub String);
+
+/// The exit code of a process's run: 0 on success, 2 for [`BadInput`] (printed as
+/// `error: ...` for the launcher to report), 1 for anything else (logged).
+pub fn exit_code(result: Result<(), Box<dyn std::error::Error>>) -> std::process::ExitCode {
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) if e.is::<BadInput>() => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::from(2)
+        }
+        Err(e) => {
+            tracing::error!("{e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
 /// CLOCK_MONOTONIC in nanoseconds: the clock of every `stamp_ns` and `origin_ns`.
 pub fn now_ns() -> u64 {
     match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {

@@ -54,13 +54,7 @@ fn main() -> ExitCode {
     if let Some(seed) = args.common.seed {
         scenario.seed = seed;
     }
-    match run(&args, &scenario) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e}");
-            ExitCode::FAILURE
-        }
-    }
+    mole_runtime::exit_code(run(&args, &scenario))
 }
 
 fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::error::Error>> {
