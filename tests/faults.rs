@@ -250,8 +250,8 @@ fn after_the_whole_stack_is_killed_a_new_one_starts_in_the_same_namespace_and_cl
     );
     assert!(processes_of(&namespace).is_empty());
     assert_eq!(
-        shm_files(),
-        before,
+        left_behind(&before),
+        Vec::<String>::new(),
         "stale resources of the killed stack were cleaned"
     );
 }

@@ -304,3 +304,12 @@ pub fn check_process_cli(bin: &str) {
     assert_eq!(output.status.code(), Some(2), "{bin} --mode warp");
     assert!(String::from_utf8_lossy(&output.stderr).contains("warp"));
 }
+
+/// iceoryx2 files present now that were not in `before`: what a run left behind. (Files that
+/// vanished are stale resources of earlier dead runs that this run's start-up cleaned.)
+pub fn left_behind(before: &[String]) -> Vec<String> {
+    shm_files()
+        .into_iter()
+        .filter(|f| !before.contains(f))
+        .collect()
+}
