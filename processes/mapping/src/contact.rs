@@ -176,15 +176,7 @@ impl ContactGrid {
     /// Writes width, height, resolution, origin, kind = GRID_CONTACT and `cells[..w·h]` into a
     /// (loaned) message; the header and the unused tail of `cells` are left alone.
     pub fn write(&self, out: &mut Grid) {
-        let g = &self.geometry;
-        out.width = g.width;
-        out.height = g.height;
-        out.resolution = g.resolution;
-        out.origin_x = g.origin_x;
-        out.origin_y = g.origin_y;
-        out.kind = GRID_CONTACT;
-        out._pad = 0;
-        out.cells[..self.cells.len()].copy_from_slice(&self.cells);
+        self.geometry.write_grid(GRID_CONTACT, &self.cells, out);
     }
 }
 

@@ -20,6 +20,19 @@ pub struct GridGeometry {
 }
 
 impl GridGeometry {
+    /// Writes this geometry, `kind` and `cells` (`width × height`, row-major) into a (loaned)
+    /// message; the header and the unused tail of `cells` are left alone.
+    pub fn write_grid(&self, kind: u32, cells: &[u8], out: &mut mole_types::Grid) {
+        out.width = self.width;
+        out.height = self.height;
+        out.resolution = self.resolution;
+        out.origin_x = self.origin_x;
+        out.origin_y = self.origin_y;
+        out.kind = kind;
+        out._pad = 0;
+        out.cells[..cells.len()].copy_from_slice(cells);
+    }
+
     /// The grid over the arena `[0, width_m] × [0, height_m]`: `ceil(W/res) × ceil(H/res)` cells,
     /// origin (0, 0); refused when a size is not positive and finite or there are more than
     /// `MAX_GRID_CELLS` cells.
