@@ -20,7 +20,7 @@ use crate::distance_field::DistanceField;
 use crate::global_path::{GlobalPath, path_distance};
 use crate::{Command, Planner, PlannerInput, RobotLimits, stop_command, usable};
 use mole_types::{
-    Grid, MAX_PATH, MODE_DONE, MODE_ESCAPE, MODE_GOAL, PlanStatus, STATUS_HAS_GOAL, wrap_angle,
+    Grid, MODE_DONE, MODE_ESCAPE, MODE_GOAL, PlanStatus, STATUS_HAS_GOAL, wrap_angle,
 };
 
 /// Rollouts step by `sim_dt` up to this time (s), by 2 × `sim_dt` beyond.
@@ -926,11 +926,7 @@ impl Planner for Dwa {
         (status.frontier_x, status.frontier_y) = (0.0, 0.0);
         status.bounces = 0;
         let path = self.global.points();
-        let n = path.len().min(MAX_PATH);
-        for (out, p) in status.path.iter_mut().zip(&path[..n]) {
-            *out = [p[0] as f32, p[1] as f32];
-        }
-        status.n_path = n as u32;
+        crate::write_path(status, path);
     }
 }
 

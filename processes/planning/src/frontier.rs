@@ -556,11 +556,7 @@ impl Planner for FrontierExplorer {
                 (status.goal_x, status.goal_y) = (c[0], c[1]);
             }
             let path = self.selector.path();
-            let n = path.len().min(MAX_PATH);
-            for (out, p) in status.path.iter_mut().zip(&path[..n]) {
-                *out = [p[0] as f32, p[1] as f32];
-            }
-            status.n_path = n as u32;
+            crate::write_path(status, path);
         }
     }
 }

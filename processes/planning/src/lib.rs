@@ -421,6 +421,15 @@ pub fn planner_by_name(
     )
 }
 
+/// Copies a path (world frame, m) into `PlanStatus::path`, as many waypoints as fit.
+pub(crate) fn write_path(status: &mut mole_types::PlanStatus, path: &[[f64; 2]]) {
+    let n = path.len().min(mole_types::MAX_PATH);
+    for (out, p) in status.path.iter_mut().zip(&path[..n]) {
+        *out = [p[0] as f32, p[1] as f32];
+    }
+    status.n_path = n as u32;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
