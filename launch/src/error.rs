@@ -111,6 +111,12 @@ pub enum LaunchError {
         /// The role.
         role: String,
     },
+    /// A hot swap asked for a role that is not running (or is being swapped already).
+    #[error("process `{role}` is not running (or a swap of it is under way)")]
+    NotRunning {
+        /// The role.
+        role: String,
+    },
 }
 
 impl LaunchError {

@@ -2,11 +2,14 @@
 //!
 //! The `mole` binary (src/main.rs) wires these to the command line and to the stack's IPC:
 //! [`load_launch_file`] → [`apply_swaps`] → [`start_order`] → [`Supervisor::spawn`] each process
-//! → [`Supervisor::poll`] while running → [`Supervisor::shutdown`] in [`stop_order`].
+//! → [`Supervisor::poll`] while running (serving `mole swap` through [`hot_swap`]) →
+//! [`Supervisor::shutdown`] in [`stop_order`].
 
 pub mod bench_ipc;
 pub mod bench_stack;
+pub mod control;
 mod error;
+pub mod hot_swap;
 pub mod launch_file;
 pub mod order;
 pub mod stats;

@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
 use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
+use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
 use mole_launch::top::{TopArgs, top};
 use mole_launch::up::{UpArgs, up};
 use std::process::ExitCode;
@@ -22,6 +23,13 @@ struct Cli {
 enum Command {
     /// Start the stack, show progress, stop when done or on Ctrl-C, write summary.json and map.png.
     Up(UpArgs),
+    /// Replace one process of a running stack (sensing, localization, mapping or planning) by
+    /// another command while the rest runs; reports the gap.
+    Swap(SwapArgs),
+    /// Stop a running stack as Ctrl-C would (it writes its summary).
+    Stop(NamespaceArgs),
+    /// One line on a running stack: tick, mode, each process's pid and state.
+    Status(NamespaceArgs),
     /// Watch a running stack: each topic's rate, latency, drops; each process's state and CPU.
     Top(TopArgs),
     /// Measure latency and throughput.
@@ -43,6 +51,9 @@ fn main() -> ExitCode {
     mole_runtime::init_tracing("mole");
     let result = match cli.command {
         Command::Up(args) => up(&args).map(drop),
+        Command::Swap(args) => swap(&args),
+        Command::Stop(args) => stop(&args),
+        Command::Status(args) => status(&args),
         Command::Top(args) => top(&args),
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
         Command::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),

@@ -39,6 +39,8 @@ pub struct ChildSpec {
     pub restart: RestartPolicy,
     /// stdout and stderr of every run are appended here.
     pub log_path: PathBuf,
+    /// Working directory (the launcher's when `None`).
+    pub cwd: Option<PathBuf>,
 }
 
 impl ChildSpec {
@@ -56,6 +58,7 @@ impl ChildSpec {
                 .collect(),
             restart: process.restart,
             log_path,
+            cwd: None,
         }
     }
 }
@@ -147,6 +150,8 @@ struct Slot {
     restart_at: Option<Instant>,
     stopping: bool,
     last_exit: Option<ExitStatus>,
+    /// A hot swap's new process, running beside `child` until it takes over.
+    replacement: Option<(Child, ChildSpec)>,
 }
 
 /// Owns the child processes of a stack. Dropping it kills and reaps every child still alive.
@@ -183,6 +188,7 @@ impl Supervisor {
             restart_at: None,
             stopping: false,
             last_exit: None,
+            replacement: None,
         };
         match index {
             Some(i) => self.slots[i] = slot,
@@ -358,6 +364,99 @@ impl Supervisor {
         killed
     }
 
+    /// The spec the role runs with.
+    #[must_use]
+    pub fn spec(&self, role: &str) -> Option<&ChildSpec> {
+        self.slot(role).map(|s| &s.spec)
+    }
+
+    /// Hot swap, first half: starts `spec` beside the role's running process (make before
+    /// break, so the role's inputs are never unread). Returns the new pid.
+    pub fn start_replacement(&mut self, spec: ChildSpec) -> Result<u32, LaunchError> {
+        let Some(slot) = self.slots.iter_mut().find(|s| s.spec.role == spec.role) else {
+            return Err(LaunchError::NotRunning { role: spec.role });
+        };
+        if slot.child.is_none() || slot.replacement.is_some() {
+            return Err(LaunchError::NotRunning { role: spec.role });
+        }
+        let child = start(&spec, 0)?;
+        let pid = child.id();
+        slot.replacement = Some((child, spec));
+        Ok(pid)
+    }
+
+    /// How the replacement ended, if it exited while starting (it is then forgotten).
+    pub fn replacement_exited(&mut self, role: &str) -> Option<ExitStatus> {
+        let slot = self.slots.iter_mut().find(|s| s.spec.role == role)?;
+        let (child, _) = slot.replacement.as_mut()?;
+        let status = match child.try_wait() {
+            Ok(Some(status)) => ExitStatus::from(status),
+            Ok(None) => return None,
+            Err(_) => ExitStatus::Signal(Signal::SIGKILL as i32),
+        };
+        slot.replacement = None;
+        Some(status)
+    }
+
+    /// Kills (whole group) and reaps the replacement; the old process keeps the role.
+    pub fn abandon_replacement(&mut self, role: &str) {
+        if let Some(slot) = self.slots.iter_mut().find(|s| s.spec.role == role)
+            && let Some((mut child, _)) = slot.replacement.take()
+        {
+            signal_group(&child, Signal::SIGKILL);
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
+    /// Hot swap, second half: SIGTERM to the old process, SIGKILL after `timeout`, then the
+    /// replacement owns the role (its restarts use the new command; the budget starts afresh).
+    /// `while_waiting` runs between looks (the launcher keeps draining its queues, so a lockstep
+    /// publisher the old process waits on is never blocked by the launcher). Returns whether
+    /// the old process needed SIGKILL.
+    pub fn promote_replacement(
+        &mut self,
+        role: &str,
+        timeout: Duration,
+        mut while_waiting: impl FnMut(),
+    ) -> bool {
+        let Some(slot) = self.slots.iter_mut().find(|s| s.spec.role == role) else {
+            return false;
+        };
+        let Some((new_child, new_spec)) = slot.replacement.take() else {
+            return false;
+        };
+        let mut killed = false;
+        if let Some(mut old) = slot.child.take() {
+            signal_group(&old, Signal::SIGTERM);
+            let deadline = Instant::now() + timeout;
+            loop {
+                match old.try_wait() {
+                    Ok(Some(_)) | Err(_) => break,
+                    Ok(None) if Instant::now() >= deadline => {
+                        signal_group(&old, Signal::SIGKILL);
+                        let _ = old.kill();
+                        let _ = old.wait();
+                        killed = true;
+                        break;
+                    }
+                    Ok(None) => {
+                        while_waiting();
+                        std::thread::sleep(Duration::from_millis(1));
+                    }
+                }
+            }
+        }
+        slot.child = Some(new_child);
+        slot.spec = new_spec;
+        slot.started = Instant::now();
+        slot.restarts_since_spawn = 0;
+        slot.streak = 0;
+        slot.restart_at = None;
+        slot.stopping = false;
+        killed
+    }
+
     fn slot(&self, role: &str) -> Option<&Slot> {
         self.slots.iter().find(|s| s.spec.role == role)
     }
@@ -368,7 +467,8 @@ impl Drop for Supervisor {
     /// launcher leaves no orphan.
     fn drop(&mut self) {
         for slot in &mut self.slots {
-            if let Some(mut child) = slot.child.take() {
+            let replacement = slot.replacement.take().map(|(child, _)| child);
+            for mut child in slot.child.take().into_iter().chain(replacement) {
                 if matches!(child.try_wait(), Ok(None)) {
                     signal_group(&child, Signal::SIGKILL);
                     let _ = child.kill();
@@ -476,6 +576,9 @@ fn start(spec: &ChildSpec, attempt: u32) -> Result<Child, LaunchError> {
         .stdout(log)
         .stderr(stderr)
         .process_group(0);
+    if let Some(cwd) = &spec.cwd {
+        command.current_dir(cwd);
+    }
     // SAFETY: between fork and exec only async-signal-safe work happens: one prctl(2) call.
     // If the launcher dies, even by SIGKILL, its children get SIGTERM instead of running on
     // as orphans that keep the namespace busy.

@@ -29,7 +29,7 @@ pub fn parse_swap(arg: &str) -> Result<(String, Vec<String>), LaunchError> {
 }
 
 /// Shell-like word splitting (POSIX "Token Recognition", quoting rules only).
-fn split_words(s: &str) -> Result<Vec<String>, &'static str> {
+pub(crate) fn split_words(s: &str) -> Result<Vec<String>, &'static str> {
     let mut words = Vec::new();
     let mut word = String::new();
     let mut in_word = false;

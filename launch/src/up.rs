@@ -1,6 +1,7 @@
 //! `mole up`: start the stack, supervise it, wait for the end, and complete the summary.
 
 use crate::RestartWhen;
+use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::{
@@ -11,7 +12,10 @@ use crate::{
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use mole_runtime::{ClockMode, CommonArgs, Context, cleanup_dead_nodes, live_nodes_in_namespace};
-use mole_types::{read_name, topics};
+use mole_types::{
+    CONTROL_FAILED, CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP, ControlRequest,
+    Stats, read_name, topics, write_name,
+};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -248,6 +252,10 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     let mut processes_pub = ctx
         .publisher(topics::STACK_PROCESSES)
         .map_err(|e| Failure::run(e.to_string()))?;
+    let mut control = ctx
+        .control_server()
+        .map_err(|e| Failure::run(e.to_string()))?;
+    let mut swaps: Vec<serde_json::Value> = Vec::new();
     let mut collector = StatsCollector::default();
     let mut gave_up: BTreeSet<String> = BTreeSet::new();
     let mut last_report = Instant::now();
@@ -293,6 +301,77 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
             ready.insert(role);
             collector.record(s);
         });
+        if let Some(call) = control.receive() {
+            let request = *call.request();
+            match request.op {
+                CONTROL_STOP => {
+                    progress.suspend(|| tracing::info!("stop requested through stack/control"));
+                    exit_reason = Some(Some("stopped"));
+                    call.respond(|r| {
+                        write_name(
+                            &mut r.text,
+                            &format!("stopping the stack in namespace `{}`", args.namespace),
+                        );
+                    });
+                }
+                CONTROL_STATUS => {
+                    let tick = status_sub.latest().map_or(0, |s| s.header.tick);
+                    let line = status_line(&launch, &supervisor, mode, tick, ticks);
+                    call.respond(|r| write_name(&mut r.text, &line));
+                }
+                _ => {
+                    let mut on_stats = |s: &Stats| {
+                        let role = read_name(&s.process).into_owned();
+                        last_heard.insert(role.clone(), Instant::now());
+                        ready.insert(role);
+                        collector.record(s);
+                    };
+                    let result =
+                        swap_spec(&launch, &supervisor, &request, &beside).and_then(|spec| {
+                            hot_swap(
+                                SwapEnv {
+                                    ctx: &ctx,
+                                    supervisor: &mut supervisor,
+                                    stats_sub: &mut stats_sub,
+                                    on_stats: &mut on_stats,
+                                    mode,
+                                    stop_timeout: Duration::from_millis(
+                                        launch.stack.shutdown_timeout_ms,
+                                    ),
+                                },
+                                spec,
+                            )
+                        });
+                    let line = match &result {
+                        Ok(report) => {
+                            swaps.push(swap_json(report));
+                            swap_sentence(report, mode)
+                        }
+                        Err(SwapError::Refused(why) | SwapError::Failed(why)) => why.clone(),
+                    };
+                    progress.suspend(|| match &result {
+                        Ok(_) => tracing::info!("{line}"),
+                        Err(_) => tracing::warn!("swap not done: {line}"),
+                    });
+                    call.respond(|r| {
+                        match &result {
+                            Ok(report) => {
+                                r.status = CONTROL_OK;
+                                r.pid = report.pid;
+                                r.gap_ns = report.gap.as_nanos() as u64;
+                                r.period_ns = report.period.as_nanos() as u64;
+                                r.steps_lost = report.steps_lost;
+                                r.steps_repeated = report.steps_repeated;
+                                r.tick = report.tick;
+                            }
+                            Err(SwapError::Refused(_)) => r.status = CONTROL_REFUSED,
+                            Err(SwapError::Failed(_)) => r.status = CONTROL_FAILED,
+                        }
+                        write_name(&mut r.text, &line);
+                    });
+                }
+            }
+        }
         for role in hung_roles(&launch, &supervisor, &mut last_heard) {
             *hangs.entry(role.clone()).or_insert(0) += 1;
             let policy = launch.process(&role).map(|p| p.restart.policy);
@@ -404,6 +483,7 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     if !killed.is_empty() {
         tracing::warn!(?killed, "needed SIGKILL");
     }
+    drop(control);
     drop(stats_sub);
     drop(processes_pub);
     drop(status_sub);
@@ -423,6 +503,7 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
         &summary_path,
         &restarts,
         &hangs,
+        &swaps,
         reason,
         started.elapsed().as_secs_f64(),
     )?;
@@ -434,6 +515,124 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
             stats: collector,
         }),
     }
+}
+
+/// The child spec of a hot swap: the role's current spec with the requested program,
+/// arguments and working directory (a relative program path is taken from that directory).
+fn swap_spec(
+    launch: &LaunchFile,
+    supervisor: &Supervisor,
+    request: &ControlRequest,
+    beside: &Path,
+) -> Result<ChildSpec, SwapError> {
+    let role = read_name(&request.role).into_owned();
+    if launch.process(&role).is_none() {
+        return Err(SwapError::Refused(format!(
+            "no process has the role `{role}` (known roles: {})",
+            launch.roles().join(", ")
+        )));
+    }
+    check_swappable(&role)?;
+    let argv = request
+        .argv()
+        .ok_or_else(|| SwapError::Refused("the command is not valid UTF-8".to_string()))?;
+    let Some((program, arguments)) = argv.split_first() else {
+        return Err(SwapError::Refused("the command is empty".to_string()));
+    };
+    let cwd = PathBuf::from(read_name(&request.cwd).into_owned());
+    if !cwd.is_absolute() {
+        return Err(SwapError::Refused(format!(
+            "the working directory `{}` is not an absolute path",
+            cwd.display()
+        )));
+    }
+    let program = if program.contains('/') {
+        cwd.join(program).display().to_string()
+    } else {
+        program.clone()
+    };
+    let program =
+        resolve_program(&program, beside).map_err(|e| SwapError::Refused(e.to_string()))?;
+    let mut spec = supervisor
+        .spec(&role)
+        .cloned()
+        .ok_or_else(|| SwapError::Refused(format!("`{role}` is not running")))?;
+    spec.program = program;
+    spec.args = arguments.to_vec();
+    spec.cwd = Some(cwd);
+    Ok(spec)
+}
+
+fn swap_sentence(report: &SwapReport, mode: ClockMode) -> String {
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let mut line = format!(
+        "swapped `{}`: pid {} → {} at tick {}; {} silent for at most {:.1} ms (median interval \
+         {:.2} ms)",
+        report.role,
+        report.old_pid,
+        report.pid,
+        report.tick,
+        report.topic,
+        ms(report.gap),
+        ms(report.period)
+    );
+    if mode == ClockMode::Lockstep {
+        line.push_str(&format!(
+            "; lockstep: {} steps lost, {} repeated",
+            report.steps_lost, report.steps_repeated
+        ));
+    }
+    if report.killed_old {
+        line.push_str("; the old process ignored SIGTERM and was killed");
+    }
+    line.push_str(&format!("; took {:.2} s", report.duration.as_secs_f64()));
+    line
+}
+
+fn swap_json(report: &SwapReport) -> serde_json::Value {
+    serde_json::json!({
+        "role": report.role,
+        "old_pid": report.old_pid,
+        "pid": report.pid,
+        "tick": report.tick,
+        "topic": report.topic,
+        "gap_ms": report.gap.as_secs_f64() * 1e3,
+        "median_interval_ms": report.period.as_secs_f64() * 1e3,
+        "steps_lost": report.steps_lost,
+        "steps_repeated": report.steps_repeated,
+        "killed_old": report.killed_old,
+        "duration_s": report.duration.as_secs_f64(),
+    })
+}
+
+/// `mole status`'s line: where the run is and every role's pid, state and restarts.
+fn status_line(
+    launch: &LaunchFile,
+    supervisor: &Supervisor,
+    mode: ClockMode,
+    tick: u64,
+    ticks: u64,
+) -> String {
+    let restarts = supervisor.restarts();
+    let roles: Vec<String> = launch
+        .processes
+        .iter()
+        .map(|p| {
+            let state = match supervisor.pid(&p.role) {
+                Some(pid) => format!("pid {pid}"),
+                None if supervisor.restart_pending(&p.role) => "restarting".to_string(),
+                None => "down".to_string(),
+            };
+            let n = restarts.get(&p.role).copied().unwrap_or(0);
+            format!("{} ({state}, {n} restarts)", p.role)
+        })
+        .collect();
+    let of = if ticks == u64::MAX {
+        String::new()
+    } else {
+        format!(" of {ticks}")
+    };
+    format!("{mode}, tick {tick}{of}: {}", roles.join(", "))
 }
 
 /// Roles that are running, were heard from, and have been silent for [`HANG_TIMEOUT`]; each is
@@ -619,6 +818,7 @@ fn finish_summary(
     path: &Path,
     restarts: &BTreeMap<String, u32>,
     hangs: &BTreeMap<String, u32>,
+    swaps: &[serde_json::Value],
     reason: Option<&str>,
     launcher_wall_s: f64,
 ) -> Result<(), Failure> {
@@ -635,6 +835,7 @@ fn finish_summary(
             "hangs".into(),
             serde_json::to_value(hangs).unwrap_or_default(),
         );
+        object.insert("swaps".into(), swaps.to_vec().into());
         object.insert(
             "restarts".into(),
             serde_json::to_value(restarts).unwrap_or_default(),

@@ -4,6 +4,7 @@
 //! document other languages code against cannot drift from the Rust types. Sizes are asserted at
 //! compile time below; `bytemuck::Pod` already refuses any implicit padding.
 
+use crate::control::*;
 use crate::geometry::*;
 use crate::messages::*;
 use core::mem::{align_of, offset_of, size_of};
@@ -115,6 +116,9 @@ pub fn all() -> Vec<TypeLayout> {
             topic, direction, _pad, count, dropped, invalid, rate_hz, latency_p50_us,
             latency_p99_us, latency_max_us),
         layout!(ProcessStatus, type_name::<ProcessStatus>(); role, pid, state, restarts, _pad),
+        layout!(ControlRequest, type_name::<ControlRequest>(); header, op, n_args, role, cwd, argv),
+        layout!(ControlResponse, type_name::<ControlResponse>();
+            header, status, pid, gap_ns, period_ns, steps_lost, steps_repeated, tick, text),
     ]
 }
 
@@ -149,6 +153,308 @@ pub fn markdown() -> String {
     s
 }
 
+/// A constant of `messages.rs` that other languages need (capacities, flags, mode codes).
+macro_rules! constants {
+    ($($c:ident),+ $(,)?) => {
+        vec![$((stringify!($c), $c as u64)),+]
+    };
+}
+
+/// Every `pub const` of `messages.rs`, by name (a test checks that none is missing).
+fn constants() -> Vec<(&'static str, u64)> {
+    constants![
+        MAX_OBSTACLES,
+        MAX_BEACONS,
+        MAX_BEAMS,
+        MAX_TACTILE,
+        MAX_CONTACTS,
+        MAX_GRID_CELLS,
+        MAX_PARTICLES,
+        MAX_PATH,
+        MAX_TOPIC_STATS,
+        NAME_LEN,
+        MAX_PROCESSES,
+        TRUTH_END,
+        TRUTH_GOAL_REACHED,
+        TRUTH_IN_CONTACT,
+        END_NONE,
+        END_TICKS,
+        END_GOAL_REACHED,
+        END_STOPPED,
+        END_EXPLORATION_COMPLETE,
+        ESTIMATOR_BAYES,
+        ESTIMATOR_KF,
+        ESTIMATOR_EKF,
+        ESTIMATOR_PF,
+        GRID_FRONTIER,
+        GRID_CONTACT,
+        CELL_UNEXPLORED,
+        CELL_FREE,
+        CELL_OCCUPIED,
+        MODE_IDLE,
+        MODE_EXPLORE,
+        MODE_BOUNCE_BACK,
+        MODE_GOAL,
+        MODE_STALLED,
+        MODE_ESCAPE,
+        MODE_DONE,
+        STATUS_HAS_GOAL,
+        STATUS_HAS_FRONTIER,
+        STATUS_EXPLORATION_COMPLETE,
+        TICK_END,
+        DIRECTION_SUBSCRIBE,
+        DIRECTION_PUBLISH,
+        PROCESS_STARTING,
+        PROCESS_RUNNING,
+        PROCESS_RESTARTING,
+        PROCESS_EXITED,
+        PROCESS_FAILED,
+    ]
+}
+
+/// One topic with what its service must hold, for other languages to open it compatibly.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct TopicLayout {
+    /// The constant's name in `topics.rs`, e.g. `SENSING_SCAN`.
+    constant: &'static str,
+    /// The name below the namespace, e.g. `sensing/scan`.
+    name: &'static str,
+    type_name: &'static str,
+    history: usize,
+    buffer: usize,
+    max_publishers: usize,
+    max_subscribers: usize,
+}
+
+fn topic_layout<M: crate::Message>(constant: &'static str, t: crate::Topic<M>) -> TopicLayout {
+    TopicLayout {
+        constant,
+        name: t.name,
+        type_name: M::TYPE_NAME,
+        history: t.history,
+        buffer: t.buffer,
+        max_publishers: t.max_publishers,
+        max_subscribers: t.max_subscribers,
+    }
+}
+
+macro_rules! topic_layouts {
+    ($($c:ident),+ $(,)?) => {
+        vec![$(topic_layout(stringify!($c), crate::topics::$c)),+]
+    };
+}
+
+/// Every topic of `topics::ALL`, in its order, with its service settings.
+fn topics() -> Vec<TopicLayout> {
+    topic_layouts![
+        WORLD_MAP,
+        WORLD_TRUTH,
+        SENSING_SCAN,
+        SENSING_TACTILE,
+        SENSING_ODOM,
+        SENSING_BEACONS,
+        SENSING_FIX,
+        LOCALIZATION_POSE,
+        LOCALIZATION_PARTICLES,
+        MAPPING_GRID,
+        MAPPING_CONTACT,
+        PLANNING_CMD,
+        PLANNING_STATUS,
+        STACK_TICK,
+        STACK_STATS,
+        MONITOR_STATUS,
+        STACK_PROCESSES,
+    ]
+}
+
+/// The ctypes expression of a field's Rust type (`[f32; 2]` → `ctypes.c_float * 2`).
+///
+/// # Panics
+/// On a type no message may hold (DESIGN.md allows only integers, floats, arrays and the
+/// message structs): the layout table itself is then wrong.
+fn ctype(ty: &str, structs: &[&str]) -> String {
+    if let Some((element, n)) = ty
+        .strip_prefix('[')
+        .and_then(|s| s.strip_suffix(']'))
+        .and_then(|s| s.rsplit_once("; "))
+    {
+        let element = ctype(element, structs);
+        return if element.contains(" * ") {
+            format!("({element}) * {n}")
+        } else {
+            format!("{element} * {n}")
+        };
+    }
+    let primitive = match ty {
+        "u8" => "c_uint8",
+        "u16" => "c_uint16",
+        "u32" => "c_uint32",
+        "u64" => "c_uint64",
+        "i8" => "c_int8",
+        "i16" => "c_int16",
+        "i32" => "c_int32",
+        "i64" => "c_int64",
+        "f32" => "c_float",
+        "f64" => "c_double",
+        other if structs.contains(&other) => return other.to_string(),
+        other => panic!("no ctypes equivalent for the field type `{other}`"),
+    };
+    format!("ctypes.{primitive}")
+}
+
+/// Writes `items` joined by ", " as lines of at most 99 characters, each starting with `indent`.
+fn wrapped(items: &[String], indent: &str) -> String {
+    let mut out = String::new();
+    let mut line = String::from(indent);
+    for item in items {
+        if line.len() > indent.len() && line.len() + item.len() + 2 > 99 {
+            out.push_str(line.trim_end());
+            out.push('\n');
+            line = String::from(indent);
+        }
+        line.push_str(item);
+        line.push_str(", ");
+    }
+    out.push_str(line.trim_end());
+    out.push('\n');
+    out
+}
+
+/// Indices of `types` with every struct before the types whose fields name it.
+fn dependency_order(types: &[TypeLayout]) -> Vec<usize> {
+    fn visit(i: usize, types: &[TypeLayout], order: &mut Vec<usize>) {
+        if order.contains(&i) {
+            return;
+        }
+        for f in &types[i].fields {
+            for word in f.ty.split(|c: char| !(c.is_alphanumeric() || c == '_')) {
+                if let Some(j) = types.iter().position(|t| t.rust_name == word)
+                    && j != i
+                {
+                    visit(j, types, order);
+                }
+            }
+        }
+        order.push(i);
+    }
+    let mut order = Vec::with_capacity(types.len());
+    for i in 0..types.len() {
+        visit(i, types, &mut order);
+    }
+    order
+}
+
+/// The layout table as a Python module of `ctypes.Structure` classes, constants and topics: the
+/// text of `examples/python_planner/mole_messages.py`.
+///
+/// Each class has a `type_name()` classmethod: the iceoryx2 Python binding records that name,
+/// `ctypes.sizeof` and `ctypes.alignment` as the service's payload type, and opening a service
+/// fails unless all three equal the Rust side's. Structs are emitted before the messages that
+/// embed them; importing the module checks every size, alignment and field offset.
+///
+/// # Panics
+/// When the layout table is wrong: a field type without a ctypes equivalent, or a topic whose
+/// message [`all`] does not list.
+pub fn python_ctypes() -> String {
+    use core::fmt::Write;
+    let types = all();
+    let structs: Vec<&str> = types.iter().map(|t| t.rust_name).collect();
+    let mut s = String::new();
+    s.push_str(
+        r#""""mole's messages as ctypes structures, for processes written in Python.
+
+Generated from shared-types/src/layout.rs: do not edit. Regenerate it with
+`MOLE_BLESS=1 cargo test -p mole-types`; a test fails when this file and the Rust types differ.
+
+Each class's type_name() is what the iceoryx2 Python package records as the service's payload
+type, with ctypes.sizeof() and ctypes.alignment(): all three must equal the Rust side's, or
+opening the service fails with incompatible types. Importing this module checks every size,
+alignment and field offset against the Rust types.
+"""
+
+import ctypes
+from typing import NamedTuple
+
+
+def _check(cls, size, alignment, offsets):
+    """Refuses to load when ctypes lays a class out otherwise than Rust does."""
+    fields = [getattr(cls, name).offset for name, _ in cls._fields_]
+    actual = (ctypes.sizeof(cls), ctypes.alignment(cls), fields)
+    if actual != (size, alignment, offsets):
+        raise TypeError(f"{cls.__name__}: ctypes {actual}, Rust {(size, alignment, offsets)}")
+"#,
+    );
+    for i in dependency_order(&types) {
+        let t = &types[i];
+        let _ = write!(
+            s,
+            "\n\nclass {}(ctypes.Structure):\n    \"\"\"`{}`: {} bytes, alignment {}.\"\"\"\n\n    _fields_ = [\n",
+            t.rust_name, t.type_name, t.size, t.align
+        );
+        for f in &t.fields {
+            let _ = writeln!(s, "        (\"{}\", {}),", f.name, ctype(&f.ty, &structs));
+        }
+        let _ = write!(
+            s,
+            "    ]\n\n    @classmethod\n    def type_name(cls) -> str:\n        return \"{}\"\n\n\n",
+            t.type_name
+        );
+        let offsets: Vec<String> = t.fields.iter().map(|f| f.offset.to_string()).collect();
+        let head = format!("_check({}, {}, {}, [", t.rust_name, t.size, t.align);
+        let one_line = format!("{head}{}])", offsets.join(", "));
+        if one_line.len() <= 99 {
+            s.push_str(&one_line);
+            s.push('\n');
+        } else {
+            s.push_str(&head);
+            s.push('\n');
+            s.push_str(&wrapped(&offsets, "    "));
+            s.push_str("])\n");
+        }
+    }
+    s.push_str("\n\n# The constants of shared-types/src/messages.rs.\n");
+    for (name, value) in constants() {
+        let _ = writeln!(s, "{name} = {value}");
+    }
+    s.push_str(
+        r#"
+
+class Topic(NamedTuple):
+    """A topic: its name below the namespace, its message, and what its service holds."""
+
+    name: str
+    message: type
+    history: int
+    buffer: int
+    max_publishers: int
+    max_subscribers: int
+
+"#,
+    );
+    for t in topics() {
+        let class = types
+            .iter()
+            .find(|l| l.type_name == t.type_name)
+            .map(|l| l.rust_name)
+            .unwrap_or_else(|| panic!("{} carries {}, which all() lacks", t.name, t.type_name));
+        let _ = writeln!(
+            s,
+            "\n{} = Topic(\n    \"{}\", {class}, history={}, buffer={}, max_publishers={}, max_subscribers={}\n)",
+            t.constant, t.name, t.history, t.buffer, t.max_publishers, t.max_subscribers
+        );
+    }
+    let constants: Vec<String> = topics().iter().map(|t| t.constant.to_string()).collect();
+    s.push_str("\nTOPICS = (\n");
+    s.push_str(&wrapped(&constants, "    "));
+    s.push_str(")\n");
+    let template = crate::topics::service_name("{namespace}", "{topic}");
+    let _ = write!(
+        s,
+        "\n\ndef service_name(namespace: str, topic: str) -> str:\n    \"\"\"The iceoryx2 service name of a topic in a namespace.\"\"\"\n    return f\"{template}\"\n"
+    );
+    s
+}
+
 // Compile-time size assertions: a layout change must be deliberate (bump the type_name version).
 const _: () = {
     assert!(size_of::<Header>() == 32);
@@ -175,6 +481,8 @@ const _: () = {
     assert!(size_of::<RunStatus>() == 56);
     assert!(size_of::<ProcessStatus>() == 48);
     assert!(size_of::<Processes>() == 40 + 48 * MAX_PROCESSES);
+    assert!(size_of::<ControlRequest>() == 72 + CONTROL_PATH_LEN + CONTROL_ARGV_LEN);
+    assert!(size_of::<ControlResponse>() == 80 + CONTROL_TEXT_LEN);
     assert!(offset_of!(WorldMap, header) == 0);
     assert!(offset_of!(Grid, cells) == 72);
     assert!(offset_of!(Scan, ranges) == 48);
@@ -220,5 +528,69 @@ mod tests {
             "docs/messages.md differs from the code: regenerate it with \
              `MOLE_BLESS=1 cargo test -p mole-types` and review the diff"
         );
+    }
+    #[test]
+    fn python_planner_mole_messages_py_matches_the_code() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/python_planner/mole_messages.py"
+        );
+        let expected = python_ctypes();
+        if std::env::var_os("MOLE_BLESS").is_some() {
+            std::fs::write(path, &expected)
+                .expect("write examples/python_planner/mole_messages.py");
+        }
+        let actual = std::fs::read_to_string(path).unwrap_or_default();
+        assert!(
+            actual == expected,
+            "examples/python_planner/mole_messages.py differs from the code: regenerate it with \
+             `MOLE_BLESS=1 cargo test -p mole-types` and review the diff"
+        );
+    }
+
+    #[test]
+    fn ctypes_of_field_types() {
+        let structs = ["Square"];
+        assert_eq!(ctype("f64", &structs), "ctypes.c_double");
+        assert_eq!(ctype("[u8; 32]", &structs), "ctypes.c_uint8 * 32");
+        assert_eq!(
+            ctype("[[f32; 2]; 512]", &structs),
+            "(ctypes.c_float * 2) * 512"
+        );
+        assert_eq!(ctype("[Square; 2048]", &structs), "Square * 2048");
+    }
+
+    #[test]
+    fn python_module_defines_structs_before_use_and_every_topic() {
+        let text = python_ctypes();
+        let at = |needle: &str| text.find(needle).unwrap_or(usize::MAX);
+        assert!(at("class Square(") < at("class WorldMap("));
+        assert!(at("class Header(") < at("class Pose("));
+        assert!(at("class TopicStats(") < at("class Stats("));
+        for t in all() {
+            assert!(text.contains(&format!("return \"{}\"", t.type_name)));
+        }
+        assert!(text.contains("return f\"mole/{namespace}/{topic}\""));
+    }
+
+    #[test]
+    fn topics_match_the_topic_table() {
+        let ours: Vec<(&str, &str)> = topics().iter().map(|t| (t.name, t.type_name)).collect();
+        assert_eq!(ours, crate::topics::ALL);
+        let stats = topics().into_iter().find(|t| t.name == "stack/stats");
+        assert_eq!(stats.map(|t| t.max_publishers), Some(32));
+    }
+
+    #[test]
+    fn every_message_constant_is_exported() {
+        let ours: Vec<&str> = constants().iter().map(|(name, _)| *name).collect();
+        for line in include_str!("messages.rs").lines() {
+            if let Some(rest) = line.strip_prefix("pub const ")
+                && !rest.starts_with("fn ")
+                && let Some((name, _)) = rest.split_once(':')
+            {
+                assert!(ours.contains(&name), "layout::constants() misses {name}");
+            }
+        }
     }
 }

@@ -6,11 +6,13 @@
 //! hostile publisher cannot cause undefined behaviour; `validate()` then says whether the values
 //! make sense, and a process drops (and counts) whatever does not.
 
+pub mod control;
 pub mod geometry;
 pub mod layout;
 pub mod messages;
 pub mod topics;
 
+pub use control::*;
 pub use geometry::*;
 pub use messages::*;
 pub use topics::Topic;

@@ -83,6 +83,33 @@ pub const STACK_STATS: Topic<Stats> = Topic::new("stack/stats").buffer(64).max_p
 pub const MONITOR_STATUS: Topic<RunStatus> = Topic::new("monitor/status").history(1).buffer(4);
 pub const STACK_PROCESSES: Topic<Processes> = Topic::new("stack/processes").history(1).buffer(4);
 
+/// A request-response service: its name and the types of its requests and responses.
+pub struct RequestResponse<Req, Resp> {
+    /// The name below the namespace, e.g. `stack/control`.
+    pub name: &'static str,
+    _types: PhantomData<fn() -> (Req, Resp)>,
+}
+
+impl<Req, Resp> Clone for RequestResponse<Req, Resp> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<Req, Resp> Copy for RequestResponse<Req, Resp> {}
+
+impl<Req, Resp> RequestResponse<Req, Resp> {
+    pub const fn new(name: &'static str) -> Self {
+        Self {
+            name,
+            _types: PhantomData,
+        }
+    }
+}
+
+/// The launcher's control service: swap a role, stop, status (`mole swap`, `mole stop`).
+pub const STACK_CONTROL: RequestResponse<crate::ControlRequest, crate::ControlResponse> =
+    RequestResponse::new("stack/control");
+
 /// Every publish-subscribe topic with its message's type name, in table order.
 pub const ALL: &[(&str, &str)] = &[
     (WORLD_MAP.name, "mole.WorldMap.v1"),

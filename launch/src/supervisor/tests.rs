@@ -24,6 +24,7 @@ fn sh(role: &str, script: &str, restart: RestartPolicy, dir: &Path) -> ChildSpec
         env: vec![("MOLE_TEST".to_owned(), "yes".to_owned())],
         restart,
         log_path: dir.join("logs").join(format!("{role}.log")),
+        cwd: None,
     }
 }
 

@@ -11,15 +11,18 @@
 //! - Dead nodes' stale resources are cleaned when a process starts.
 //! - Per-topic statistics (rate, dropped, invalid, latency from `origin_ns`) are published on
 //!   `stack/stats` once a second.
+//! - `stack/control` (request-response) carries `mole swap` / `mole stop` to the launcher.
 
 mod alloc_counter;
 mod clock;
+mod control;
 mod node;
 mod ports;
 mod stats;
 
 pub use alloc_counter::{CountingAllocator, allocations_during};
 pub use clock::{ClockMode, StepGate, parse_point};
+pub use control::{ControlCall, ControlClient, ControlServer};
 pub use node::{
     Attachment, BadInput, CommonArgs, Context, RuntimeError, WaitSet, Wake, cleanup_dead_nodes,
     exit_code, init_tracing, list_topics, live_nodes_in_namespace, now_ns,

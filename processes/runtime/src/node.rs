@@ -83,7 +83,7 @@ pub fn now_ns() -> u64 {
 /// Logs to stderr through `tracing`, filtered by RUST_LOG (default `info`); iceoryx2's own log
 /// shows errors only unless IOX2_LOG_LEVEL says otherwise.
 pub fn init_tracing(role: &str) {
-    set_log_level_from_env_or(LogLevel::Error);
+    set_iceoryx_log_level();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
@@ -92,6 +92,26 @@ pub fn init_tracing(role: &str) {
         .with_target(false)
         .try_init();
     tracing::debug!(role, "tracing initialised");
+}
+
+/// iceoryx2's own log shows errors only, unless IOX2_LOG_LEVEL says otherwise.
+pub(crate) fn set_iceoryx_log_level() {
+    set_log_level_from_env_or(LogLevel::Error);
+}
+
+/// The node `mole/<namespace>/<role>`, iceoryx2's signal handling disabled.
+pub(crate) fn create_node(namespace: &str, role: &str) -> Result<Node<ipc::Service>, RuntimeError> {
+    set_iceoryx_log_level();
+    let node_name = format!("mole/{namespace}/{role}");
+    let name: NodeName = node_name
+        .as_str()
+        .try_into()
+        .map_err(|e| RuntimeError::Name(node_name.clone(), format!("{e:?}")))?;
+    NodeBuilder::new()
+        .name(&name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| RuntimeError::Node(node_name, format!("{e:?}")))
 }
 
 /// Removes the resources of every dead node (a crashed earlier run, a killed process), so they
@@ -211,18 +231,8 @@ impl Context {
         args: &CommonArgs,
         shutdown: Arc<AtomicBool>,
     ) -> Result<Context, RuntimeError> {
-        set_log_level_from_env_or(LogLevel::Error);
         cleanup_dead_nodes();
-        let node_name = format!("mole/{}/{role}", args.namespace);
-        let name: NodeName = node_name
-            .as_str()
-            .try_into()
-            .map_err(|e| RuntimeError::Name(node_name.clone(), format!("{e:?}")))?;
-        let node = NodeBuilder::new()
-            .name(&name)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(|e| RuntimeError::Node(node_name.clone(), format!("{e:?}")))?;
+        let node = create_node(&args.namespace, role)?;
         let mut ctx = Context {
             node,
             namespace: args.namespace.clone(),
@@ -264,9 +274,17 @@ impl Context {
     pub fn request_shutdown(&self) {
         self.shutdown.store(true, Ordering::SeqCst);
     }
-    /// Counts a handled step (reported in the statistics).
+    /// Counts a handled step (reported in the statistics). The first one is announced at once,
+    /// so a launcher swapping this process in knows when it has taken over.
     pub fn count_step(&mut self) {
         self.steps += 1;
+        if self.steps == 1 {
+            self.publish_stats();
+        }
+    }
+
+    pub(crate) fn node(&self) -> &Node<ipc::Service> {
+        &self.node
     }
 
     fn service_name(&self, topic: &str) -> Result<ServiceName, RuntimeError> {

@@ -110,10 +110,21 @@ impl<M: Message> Subscriber<M> {
         valid
     }
 
-    /// Keeps only the newest valid message; returns whether a new one arrived.
+    /// Keeps only the newest valid message (the highest tick); returns whether a new one
+    /// arrived.
+    ///
+    /// Newest by tick, not by arrival: while a hot swap runs two publishers side by side, the
+    /// old one may still send step k−1 after the new one sent step k, and a lockstep consumer
+    /// that took the late k−1 would wait for a step k nobody sends again.
     pub fn update(&mut self) -> bool {
         let mut fresh = false;
         while let Some(sample) = self.next_valid() {
+            if self
+                .tick()
+                .is_some_and(|newest| sample.payload().header().tick < newest)
+            {
+                continue;
+            }
             // Release the older sample before keeping the newer one.
             self.latest = None;
             self.latest = Some(sample);

@@ -117,10 +117,14 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
             tracing::info!(tick, "stopped");
             return Ok(());
         }
-        let mut fresh = None;
+        let mut fresh: Option<(u64, f64, f64, u64)> = None;
         cmd_sub.drain(|cmd| {
-            fresh = Some((cmd.header.tick, cmd.v, cmd.omega, cmd.header.origin_ns));
-            exploration_complete = cmd.mode == MODE_DONE;
+            // The highest tick wins: during a hot swap the old planner may answer an older
+            // step after the new one answered this one.
+            if fresh.is_none_or(|(t, ..)| cmd.header.tick >= t) {
+                fresh = Some((cmd.header.tick, cmd.v, cmd.omega, cmd.header.origin_ns));
+                exploration_complete = cmd.mode == MODE_DONE;
+            }
         });
         if let Some((cmd_tick, v, omega, origin)) = fresh {
             command = (v, omega);

@@ -1,0 +1,120 @@
+#!/usr/bin/env python3
+"""mole's planning role in Python: a wall-avoiding wanderer.
+
+world/map once, then localization/pose and sensing/scan every step → planning/cmd, through
+iceoryx2's Python package and the ctypes layouts of mole_messages.py (generated from the Rust
+types). Run it in the place of the Rust planner, from the repository's root:
+
+    mole up --swap planning="python3 examples/python_planner/planner.py"
+"""
+
+import math
+import random
+import sys
+
+import mole_messages as msg
+from mole_runtime import BadInput, Node, common_args
+
+
+class Wanderer:
+    """Drives ahead, its heading wandering a little. When the scan shows something in the
+    corridor the robot is about to sweep, it turns on the spot toward the more open side until
+    that corridor is clear by a wider margin (the hysteresis keeps it from chattering)."""
+
+    def __init__(self, robot, seed):
+        self.radius = robot.radius
+        self.speed, self.turn_rate = 0.6 * robot.max_speed, 0.7 * robot.max_omega
+        self.stop_at, self.clear_at = robot.radius + 0.3, robot.radius + 0.6
+        self.turning, self.drift = 0, 0.0
+        self.random = random.Random(seed)
+
+    def step(self, scan):
+        """(v, ω, mode) for one step, from a scan in the robot frame."""
+        ahead, left, right = math.inf, 0.0, 0.0
+        for i, r in enumerate(scan.ranges[: scan.n_beams]):
+            a = scan.angle_min + i * scan.angle_increment
+            if math.cos(a) > 0 and abs(r * math.sin(a)) < self.radius + 0.05:
+                ahead = min(ahead, r * math.cos(a))
+            if math.sin(a) > 0:
+                left += r
+            else:
+                right += r
+        if self.turning and ahead > self.clear_at:
+            self.turning = 0
+        elif not self.turning and ahead < self.stop_at:
+            self.turning = 1 if left >= right else -1
+        if self.turning:
+            return 0.0, self.turning * self.turn_rate, msg.MODE_BOUNCE_BACK
+        self.drift = min(1.0, max(-1.0, 0.95 * self.drift + self.random.gauss(0.0, 0.15)))
+        slow_down = min(1.0, (ahead - self.stop_at) / (self.clear_at - self.stop_at))
+        v = self.speed * max(0.3, slow_down)
+        return v, 0.3 * self.turn_rate * self.drift, msg.MODE_EXPLORE
+
+
+def finite(*values):
+    return all(math.isfinite(v) for v in values)
+
+
+def valid_map(world):
+    robot = world.robot
+    return robot.radius > 0 and finite(robot.radius, robot.max_speed, robot.max_omega)
+
+
+def valid_scan(scan):
+    n = scan.n_beams
+    return (n <= msg.MAX_BEAMS and finite(scan.angle_min, scan.angle_increment)
+            and all(math.isfinite(r) and r >= 0 for r in scan.ranges[:n]))
+
+
+def run():
+    namespace, lockstep, seed = common_args()
+    node = Node("planning", namespace, lockstep)
+    map_sub = node.subscriber(msg.WORLD_MAP, valid_map)
+    pose_sub = node.subscriber(msg.LOCALIZATION_POSE, lambda p: finite(p.x, p.y, p.theta))
+    scan_sub = node.subscriber(msg.SENSING_SCAN, valid_scan)
+    grid_sub = node.subscriber(msg.MAPPING_GRID, lambda g: g.width * g.height <= len(g.cells))
+    cmd_pub = node.publisher(msg.PLANNING_CMD)
+    node.ready()
+
+    wanderer, last_tick = None, None
+    while node.wait():
+        if map_sub.update() and wanderer is None:
+            world = map_sub.latest()
+            wanderer = Wanderer(world.robot, world.seed if seed is None else seed)
+            node.log("map received")
+        map_sub.release()
+        pose_sub.update()
+        scan_sub.update()
+        grid_sub.update()
+        # The Rust planner's rule for a step: a pose of a new tick triggers it; lockstep also
+        # waits for the scan and the mapping/grid of that tick (the grid unused here, but
+        # awaited so that mapping keeps up with every step and the maps are deterministic).
+        tick = pose_sub.tick()
+        inputs = [scan_sub.tick(), grid_sub.tick()] if lockstep else [scan_sub.tick()]
+        if wanderer is None or tick is None or (last_tick is not None and tick <= last_tick):
+            continue
+        if None in inputs or (lockstep and any(t != tick for t in inputs)):
+            continue
+        last_tick = tick
+        v, omega, mode = wanderer.step(scan_sub.latest())
+
+        def fill(cmd):
+            cmd.v, cmd.omega, cmd.mode = v, omega, mode
+
+        # origin_ns travels on: the world measures the loop latency from it.
+        cmd_pub.publish(tick, pose_sub.latest().header.origin_ns, fill)
+        node.steps += 1
+    node.close()
+
+
+def main():
+    try:
+        run()
+    except BadInput as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

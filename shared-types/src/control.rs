@@ -1,0 +1,171 @@
+//! `stack/control`: the launcher's request-response service (DESIGN.md, "Topics"). `mole swap`,
+//! `mole stop` and `mole status` send a [`ControlRequest`]; the running `mole up` answers with one
+//! [`ControlResponse`].
+
+use crate::messages::{Header, NAME_LEN};
+use crate::{Invalid, Message, within};
+use bytemuck::{Pod, Zeroable};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// `ControlRequest::op`: replace `role` by the command in `argv`, while the rest runs.
+pub const CONTROL_SWAP: u32 = 1;
+/// `ControlRequest::op`: stop the stack as Ctrl-C would.
+pub const CONTROL_STOP: u32 = 2;
+/// `ControlRequest::op`: describe the stack in one line.
+pub const CONTROL_STATUS: u32 = 3;
+
+/// Bytes for the NUL-separated words of a command.
+pub const CONTROL_ARGV_LEN: usize = 2048;
+/// Bytes for a directory path.
+pub const CONTROL_PATH_LEN: usize = 1024;
+/// Bytes for the answer's sentence.
+pub const CONTROL_TEXT_LEN: usize = 1024;
+
+/// One request to the launcher.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.ControlRequest.v1")]
+pub struct ControlRequest {
+    pub header: Header,
+    /// `CONTROL_SWAP`, `CONTROL_STOP` or `CONTROL_STATUS`.
+    pub op: u32,
+    /// How many NUL-terminated words `argv` holds.
+    pub n_args: u32,
+    /// The role to swap, NUL-padded.
+    pub role: [u8; NAME_LEN],
+    /// The directory the command is run in (where `mole swap` was called), NUL-padded.
+    pub cwd: [u8; CONTROL_PATH_LEN],
+    /// The command, program first, each word NUL-terminated.
+    pub argv: [u8; CONTROL_ARGV_LEN],
+}
+
+impl ControlRequest {
+    /// An empty request for `op`.
+    pub fn new(op: u32) -> Self {
+        let mut request: Self = Zeroable::zeroed();
+        request.op = op;
+        request
+    }
+
+    /// Writes `words` NUL-terminated into `argv`; false when they do not fit or hold a NUL.
+    pub fn set_argv<S: AsRef<str>>(&mut self, words: &[S]) -> bool {
+        self.argv = [0; CONTROL_ARGV_LEN];
+        let mut at = 0;
+        for word in words {
+            let bytes = word.as_ref().as_bytes();
+            if bytes.contains(&0) || at + bytes.len() + 1 > CONTROL_ARGV_LEN {
+                return false;
+            }
+            self.argv[at..at + bytes.len()].copy_from_slice(bytes);
+            at += bytes.len() + 1;
+        }
+        self.n_args = words.len() as u32;
+        true
+    }
+
+    /// The words of `argv`, `None` when `n_args` does not match or a word is not UTF-8.
+    pub fn argv(&self) -> Option<Vec<String>> {
+        let mut words = Vec::with_capacity(self.n_args as usize);
+        let mut rest = &self.argv[..];
+        for _ in 0..self.n_args {
+            let end = rest.iter().position(|&b| b == 0)?;
+            words.push(std::str::from_utf8(&rest[..end]).ok()?.to_owned());
+            rest = &rest[end + 1..];
+        }
+        Some(words)
+    }
+}
+
+impl Message for ControlRequest {
+    const TYPE_NAME: &'static str = "mole.ControlRequest.v1";
+    fn header(&self) -> &Header {
+        &self.header
+    }
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+    fn validate(&self) -> Result<(), Invalid> {
+        if !matches!(self.op, CONTROL_SWAP | CONTROL_STOP | CONTROL_STATUS) {
+            return Err(Invalid::UnknownCode("op"));
+        }
+        within("n_args", self.n_args, CONTROL_ARGV_LEN / 2)?;
+        if self.op == CONTROL_SWAP && (self.n_args == 0 || self.argv().is_none()) {
+            return Err(Invalid::OutOfRange("argv"));
+        }
+        Ok(())
+    }
+}
+
+/// `ControlResponse::status`: done.
+pub const CONTROL_OK: u32 = 0;
+/// `ControlResponse::status`: refused, the request was wrong (an unknown role, a missing
+/// program); nothing changed.
+pub const CONTROL_REFUSED: u32 = 1;
+/// `ControlResponse::status`: tried and failed (the new process died while starting); the old
+/// process keeps running.
+pub const CONTROL_FAILED: u32 = 2;
+
+/// The launcher's answer.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.ControlResponse.v1")]
+pub struct ControlResponse {
+    pub header: Header,
+    /// `CONTROL_OK`, `CONTROL_REFUSED` or `CONTROL_FAILED`.
+    pub status: u32,
+    /// The new process's pid after a swap.
+    pub pid: u32,
+    /// The longest silence of the swapped role's output topic during the swap (ns).
+    pub gap_ns: u64,
+    /// The same topic's median interval between messages during the swap (ns).
+    pub period_ns: u64,
+    /// World steps whose tick never appeared on world/truth during the swap.
+    pub steps_lost: u64,
+    /// World steps published twice during the swap.
+    pub steps_repeated: u64,
+    /// The world's tick when the swap completed.
+    pub tick: u64,
+    /// What happened, in one sentence, NUL-padded UTF-8.
+    pub text: [u8; CONTROL_TEXT_LEN],
+}
+
+impl Message for ControlResponse {
+    const TYPE_NAME: &'static str = "mole.ControlResponse.v1";
+    fn header(&self) -> &Header {
+        &self.header
+    }
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+    fn validate(&self) -> Result<(), Invalid> {
+        if self.status > CONTROL_FAILED {
+            return Err(Invalid::UnknownCode("status"));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn argv_round_trips_and_refuses_what_does_not_fit() {
+        let mut r: ControlRequest = Zeroable::zeroed();
+        r.op = CONTROL_SWAP;
+        assert!(r.set_argv(&["python3", "p y.py", ""]));
+        assert_eq!(r.argv().unwrap(), ["python3", "p y.py", ""]);
+        assert_eq!(r.validate(), Ok(()));
+        assert!(!r.set_argv(&["a\0b"]));
+        let long = "x".repeat(CONTROL_ARGV_LEN);
+        assert!(!r.set_argv(&[long.as_str()]));
+        r.argv = [b'x'; CONTROL_ARGV_LEN];
+        r.n_args = 1;
+        assert_eq!(r.argv(), None, "a word without its NUL");
+        r.n_args = 0;
+        assert_eq!(r.validate(), Err(Invalid::OutOfRange("argv")));
+        r.op = 9;
+        assert_eq!(r.validate(), Err(Invalid::UnknownCode("op")));
+    }
+}

@@ -1,0 +1,269 @@
+//! A process in another language: the Python planner of `examples/python_planner` (the iceoryx2
+//! package from PyPI, ctypes layouts generated from shared-types) in the planning role of the
+//! real stack. Skipped, with the reason on stderr, where no Python has the iceoryx2 package at
+//! the stack's version (`scripts/python-env.sh` installs it; `.ci/run` calls it).
+
+use mole_integration_tests::*;
+use mole_runtime::{ClockMode, CommonArgs, Context};
+use mole_types::{DIRECTION_PUBLISH, read_name, topics};
+use std::collections::BTreeMap;
+use std::process::Command;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+const RUN_TIMEOUT: Duration = Duration::from_secs(240);
+const PLANNER: &str = "examples/python_planner/planner.py";
+
+/// The iceoryx2 version the Rust side is built against: services record it, and a process of
+/// another version cannot open them.
+fn iceoryx2_version() -> Option<String> {
+    let lock = std::fs::read_to_string(workspace().join("Cargo.lock")).ok()?;
+    let mut lines = lock.lines();
+    while let Some(line) = lines.next() {
+        if line == "name = \"iceoryx2\"" {
+            let version = lines
+                .next()?
+                .strip_prefix("version = \"")?
+                .strip_suffix('"')?;
+            return Some(version.to_string());
+        }
+    }
+    None
+}
+
+/// A Python that imports iceoryx2 at the stack's version (target/python-env first, then
+/// python3 on PATH), or why there is none.
+fn python() -> Result<String, String> {
+    let version = iceoryx2_version().ok_or("Cargo.lock names no iceoryx2 version")?;
+    let venv = workspace().join("target/python-env/bin/python3");
+    let mut reasons = Vec::new();
+    for candidate in [venv.display().to_string(), "python3".to_string()] {
+        let probe = "import importlib.metadata as m, iceoryx2; print(m.version('iceoryx2'))";
+        match Command::new(&candidate).args(["-c", probe]).output() {
+            Err(e) => reasons.push(format!("{candidate}: {e}")),
+            Ok(out) if !out.status.success() => {
+                reasons.push(format!("{candidate} cannot import iceoryx2"));
+            }
+            Ok(out) => {
+                let found = String::from_utf8_lossy(&out.stdout).trim().to_string();
+                if found == version {
+                    return Ok(candidate);
+                }
+                reasons.push(format!("{candidate} has iceoryx2 {found}"));
+            }
+        }
+    }
+    Err(format!(
+        "no Python with iceoryx2 {version} ({}); scripts/python-env.sh installs one",
+        reasons.join("; ")
+    ))
+}
+
+fn python_or_skip() -> Option<String> {
+    match python() {
+        Ok(python) => Some(python),
+        Err(reason) => {
+            eprintln!("skipped: {reason}");
+            None
+        }
+    }
+}
+
+/// `--swap planning=...` running the planner with `python`.
+fn swap(python: &str) -> String {
+    format!("planning='{python}' {PLANNER}")
+}
+
+/// Runs a stack to its end; returns its summary and its logs (checked for success).
+fn run(test: &str, args: &[&str]) -> (serde_json::Value, String) {
+    let stack = Stack::start(test, args);
+    let namespace = stack.namespace.clone();
+    let keep = stack.out.with_extension("kept");
+    let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
+    let logs = logs(&keep);
+    let summary = summary(&keep);
+    let planning_log = std::fs::read_to_string(keep.join("logs/planning.log")).unwrap_or_default();
+    let _ = std::fs::remove_dir_all(&keep);
+    assert!(
+        output.status.success(),
+        "mole up failed: {}\n{logs}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(processes_of(&namespace).is_empty(), "processes left behind");
+    (summary, planning_log)
+}
+
+fn f64_of(summary: &serde_json::Value, field: &str) -> f64 {
+    summary[field]
+        .as_f64()
+        .unwrap_or_else(|| panic!("summary field `{field}` is not a number: {summary:#}"))
+}
+
+/// What the Python planner says when SIGTERM stopped it cleanly: `stopped after N steps`.
+fn steps_at_stop(planning_log: &str) -> Option<u64> {
+    let line = planning_log
+        .lines()
+        .find_map(|l| l.split_once("stopped after ").map(|(_, rest)| rest))?;
+    line.split_whitespace().next()?.parse().ok()
+}
+
+#[test]
+fn the_python_planner_drives_the_lockstep_stack_deterministically() {
+    let Some(python) = python_or_skip() else {
+        return;
+    };
+    let _serial = serial();
+    let before = shm_files();
+    let swap = swap(&python);
+    let args = [
+        "--mode", "lockstep", "--ticks", "1500", "--seed", "3", "--swap", &swap,
+    ];
+    let (first, log) = run("py-a", &args);
+    let (second, _) = run("py-b", &args);
+
+    assert_eq!(first["ticks"], 1500, "every step completed: {first:#}");
+    assert_eq!(first["exit_reason"], "ticks", "{first:#}");
+    assert!(
+        f64_of(&first, "path_length_m") > 2.0,
+        "the robot moved: {first:#}"
+    );
+    assert!(f64_of(&first, "max_penetration_m") <= 0.001, "{first:#}");
+    assert_eq!(first["restarts"]["planning"], 0, "{first:#}");
+    // The world measures the loop latency from the origin_ns the planner copied from the pose:
+    // a planner that dropped it would show the machine's uptime here.
+    let p99 = first["loop_latency_us"]["p99"].as_f64().unwrap_or(f64::MAX);
+    assert!(p99 < 1e6, "loop latency p99 {p99} µs: {first:#}");
+    // One command per tick: the world steps only once the command of the step before arrived.
+    let steps = steps_at_stop(&log).unwrap_or(0);
+    assert!(
+        steps >= 1500,
+        "the planner stopped cleanly after {steps} steps:\n{log}"
+    );
+    for field in ["path_length_m", "grid_hash", "contact_hash", "coverage"] {
+        assert_eq!(first[field], second[field], "same seed, same run: {field}");
+    }
+    assert_eq!(left_behind(&before), Vec::<String>::new(), "left behind");
+}
+
+/// The latest stack/stats of the Python planner: pid, steps, and per topic (count, rate).
+#[derive(Debug, Default)]
+struct PlannerStats {
+    pid: u32,
+    steps: u64,
+    cpu_ns: u64,
+    topics: BTreeMap<String, (u32, u64, f32)>,
+}
+
+impl PlannerStats {
+    /// Whether the last window shows planning/cmd published at more than half the world's
+    /// 100 Hz.
+    fn commanding(&self) -> bool {
+        self.topics
+            .get("planning/cmd")
+            .is_some_and(|(direction, count, rate)| {
+                *direction == DIRECTION_PUBLISH && *count > 0 && *rate > 50.0
+            })
+    }
+}
+
+#[test]
+fn the_python_planner_reports_its_statistics_in_realtime() {
+    let Some(python) = python_or_skip() else {
+        return;
+    };
+    let _serial = serial();
+    let before = shm_files();
+    let swap = swap(&python);
+    let stack = Stack::start(
+        "py-rt",
+        &[
+            "--mode", "realtime", "--ticks", "800", "--seed", "3", "--swap", &swap,
+        ],
+    );
+    stack.wait_for_log("planning", "ready", Duration::from_secs(60));
+    let args = CommonArgs {
+        namespace: stack.namespace.clone(),
+        mode: ClockMode::Realtime,
+        rate_hz: 100.0,
+        seed: None,
+    };
+    let observer = Context::with_shutdown_flag("observer", &args, Arc::new(AtomicBool::new(false)))
+        .expect("observer context");
+    let mut stats_sub = observer.subscriber(topics::STACK_STATS).expect("stats");
+    // Watch until a window of a second shows the planner commanding at the world's rate, and
+    // one more window came.
+    let mut seen = PlannerStats::default();
+    let mut samples = 0;
+    let mut cmdline = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !(seen.commanding() && samples >= 2) && Instant::now() < deadline {
+        stats_sub.drain(|s| {
+            if read_name(&s.process) == "planning" {
+                samples += 1;
+                seen.pid = s.pid;
+                seen.steps = s.steps;
+                seen.cpu_ns = s.cpu_ns;
+                seen.topics = s
+                    .topics()
+                    .iter()
+                    .map(|t| {
+                        let name = read_name(&t.topic).into_owned();
+                        (name, (t.direction, t.count, t.rate_hz))
+                    })
+                    .collect();
+            }
+        });
+        if seen.pid != 0 {
+            cmdline = std::fs::read(format!("/proc/{}/cmdline", seen.pid)).unwrap_or_default();
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    drop(stats_sub);
+    drop(observer);
+
+    assert!(
+        seen.commanding(),
+        "planning/cmd at the world's rate: {seen:?}"
+    );
+    assert!(samples >= 2, "statistics once a second: {samples} in 30 s");
+    assert!(
+        String::from_utf8_lossy(&cmdline).contains("planner.py"),
+        "the planning statistics come from the Python process (pid {})",
+        seen.pid
+    );
+    assert!(seen.steps > 0 && seen.cpu_ns > 0, "{seen:?}");
+    for input in [
+        "localization/pose",
+        "sensing/scan",
+        "world/map",
+        "stack/stats",
+    ] {
+        assert!(seen.topics.contains_key(input), "{input}: {seen:?}");
+    }
+
+    let namespace = stack.namespace.clone();
+    let keep = stack.out.with_extension("kept");
+    let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
+    let logs = logs(&keep);
+    let summary = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    assert!(
+        output.status.success(),
+        "mole up failed: {}\n{logs}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(processes_of(&namespace).is_empty(), "processes left behind");
+    assert_eq!(summary["ticks"], 800, "{summary:#}");
+    let rate = summary["topics"]["planning/cmd"]["rate_hz"]
+        .as_f64()
+        .unwrap_or(0.0);
+    assert!(rate > 50.0, "planning/cmd at {rate} Hz: {summary:#}");
+    assert!(summary["hangs"].get("planning").is_none(), "{summary:#}");
+    assert_eq!(summary["restarts"]["planning"], 0, "{summary:#}");
+    assert!(
+        f64_of(&summary, "max_penetration_m") <= 0.001,
+        "{summary:#}"
+    );
+    assert_eq!(left_behind(&before), Vec::<String>::new(), "left behind");
+}

@@ -1,0 +1,132 @@
+//! Hot swap through `mole swap` (stack/control): lockstep loses and repeats no step, realtime
+//! reports its gap, and every refusal leaves the running stack untouched.
+
+use mole_integration_tests::*;
+use std::process::Output;
+use std::time::Duration;
+
+fn mole_swap(namespace: &str, args: &[&str]) -> Output {
+    let mut all = vec!["swap", "--namespace", namespace];
+    all.extend_from_slice(args);
+    run_mole(&all)
+}
+
+fn text(output: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    )
+}
+
+#[test]
+fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
+    let _serial = serial();
+    let before = shm_files();
+    // Long enough never to end by itself: `mole stop` ends it.
+    let stack = Stack::start(
+        "swap-lockstep",
+        &["--mode", "lockstep", "--ticks", "10000000"],
+    );
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    let ns = stack.namespace.clone();
+
+    // Refusals: exit 2, one line naming what was wrong.
+    for (args, needle) in [
+        (
+            &["world", "mole-world"][..],
+            "cannot be swapped while it runs",
+        ),
+        (
+            &["planer", "mole-planning"][..],
+            "no process has the role `planer`",
+        ),
+        (&["planning", "./no/such/program"][..], "not found"),
+    ] {
+        let out = mole_swap(&ns, args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", text(&out));
+        assert!(text(&out).contains(needle), "{args:?}: {}", text(&out));
+    }
+    // A replacement that dies while starting: exit 1, and the old process keeps the role.
+    let out = mole_swap(&ns, &["planning", "/bin/false"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(text(&out).contains("keeps running"), "{}", text(&out));
+
+    // Two real swaps, one quoted command and one as words.
+    for args in [
+        &["planning", "mole-planning --planner random-walk"][..],
+        &["sensing", "mole-sensing"][..],
+    ] {
+        let out = mole_swap(&ns, args);
+        assert!(out.status.success(), "{args:?}: {}", text(&out));
+        assert!(
+            text(&out).contains("lockstep: 0 steps lost, 0 repeated"),
+            "{}\n{}",
+            text(&out),
+            logs(&stack.out)
+        );
+    }
+    let out = run_mole(&["status", "--namespace", &ns]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(text(&out).contains("planning (pid"), "{}", text(&out));
+
+    let out = run_mole(&["stop", "--namespace", &ns]);
+    assert!(out.status.success(), "{}", text(&out));
+    let keep = std::env::temp_dir().join(format!("mole-keep-{ns}"));
+    let output = stack.wait_and_copy(&keep, Duration::from_secs(60));
+    assert!(output.status.success(), "{}", logs(&keep));
+    let s = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    assert_eq!(s["exit_reason"], "stopped", "{s}");
+    let swaps = s["swaps"].as_array().expect("swaps in summary.json");
+    assert_eq!(swaps.len(), 2, "{s}");
+    for swap in swaps {
+        assert_eq!(swap["steps_lost"], 0, "{swap}");
+        assert_eq!(swap["steps_repeated"], 0, "{swap}");
+    }
+    assert_eq!(s["restarts"]["planning"], 0, "a swap is not a restart: {s}");
+    let leftovers = left_behind(&before);
+    assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
+}
+
+#[test]
+fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
+    let _serial = serial();
+    let before = shm_files();
+    let stack = Stack::start("swap-realtime", &["--mode", "realtime", "--ticks", "800"]);
+    stack.wait_for_log("localization", "map received", Duration::from_secs(60));
+    let out = mole_swap(&stack.namespace, &["localization", "mole-localization"]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("localization/pose silent for at most"),
+        "{}",
+        text(&out)
+    );
+    let keep = std::env::temp_dir().join(format!("mole-keep-{}", stack.namespace));
+    let output = stack.wait_and_copy(&keep, Duration::from_secs(120));
+    assert!(output.status.success(), "{}", logs(&keep));
+    let s = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    assert_eq!(s["ticks"], 800);
+    let swaps = s["swaps"].as_array().expect("swaps in summary.json");
+    assert_eq!(swaps.len(), 1, "{s}");
+    let gap = swaps[0]["gap_ms"].as_f64().unwrap();
+    let period = swaps[0]["median_interval_ms"].as_f64().unwrap();
+    // Make before break: the pose never stops for long (no restart, no timeout); a bound of
+    // a second is a correctness check (a lost role would stay silent), not a timing target.
+    assert!(gap > 0.0 && gap < 1000.0, "gap {gap} ms");
+    assert!(period > 0.0, "{s}");
+    assert_eq!(s["restarts"]["localization"], 0, "a swap is not a restart");
+    let leftovers = left_behind(&before);
+    assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
+}
+
+#[test]
+fn swap_with_no_stack_in_the_namespace_is_bad_input() {
+    let out = mole_swap(
+        &unique_namespace("swap-none"),
+        &["planning", "mole-planning"],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(text(&out).contains("no stack is running"), "{}", text(&out));
+}
