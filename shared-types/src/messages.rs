@@ -660,7 +660,8 @@ impl Message for Grid {
         if self.resolution <= 0.0 {
             return Err(Invalid::OutOfRange("resolution"));
         }
-        if self.cells().iter().any(|c| *c > max_cell) {
+        // A max over every cell (no early exit) vectorises; grids are checked every step.
+        if self.cells().iter().fold(0u8, |m, &c| m.max(c)) > max_cell {
             return Err(Invalid::UnknownCode("cells"));
         }
         Ok(())

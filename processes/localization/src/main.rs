@@ -37,21 +37,18 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
     let mut ctx = Context::new("localization", &args.common)?;
     let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
     let mut odom_sub = ctx.subscriber(topics::SENSING_ODOM)?;
-    let mut beacons_sub = ctx.subscriber(topics::SENSING_BEACONS)?;
-    let mut fix_sub = ctx.subscriber(topics::SENSING_FIX)?;
+    // Sensing publishes odom last: the fix and the beacons of a step are in when odom wakes us.
+    let mut beacons_sub = ctx.passive_subscriber(topics::SENSING_BEACONS)?;
+    let mut fix_sub = ctx.passive_subscriber(topics::SENSING_FIX)?;
     let mut pose_pub = ctx.publisher(topics::LOCALIZATION_POSE)?;
     let mut particles_pub = ctx.publisher(topics::LOCALIZATION_PARTICLES)?;
     let waitset = ctx.waitset()?;
-    let wakers = [
-        map_sub.waker(),
-        odom_sub.waker(),
-        beacons_sub.waker(),
-        fix_sub.waker(),
-    ];
+    let wakers = [map_sub.waker(), odom_sub.waker()];
     let _attached = wakers
         .iter()
         .map(|w| waitset.attach(w))
         .collect::<Result<Vec<_>, _>>()?;
+    ctx.anticipate(&waitset, &wakers[1]);
     ctx.ready();
 
     let mut estimator: Option<Box<dyn Estimator>> = None;

@@ -38,17 +38,14 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("mapping", &args.common)?;
     let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
     let mut pose_sub = ctx.subscriber(topics::LOCALIZATION_POSE)?;
-    let mut scan_sub = ctx.subscriber(topics::SENSING_SCAN)?;
-    let mut tactile_sub = ctx.subscriber(topics::SENSING_TACTILE)?;
+    // A step's pose comes after its scan and tactile readings (localization waits for sensing's
+    // last topic): the pose alone wakes us.
+    let mut scan_sub = ctx.passive_subscriber(topics::SENSING_SCAN)?;
+    let mut tactile_sub = ctx.passive_subscriber(topics::SENSING_TACTILE)?;
     let mut grid_pub = ctx.publisher(topics::MAPPING_GRID)?;
     let mut contact_pub = ctx.publisher(topics::MAPPING_CONTACT)?;
     let waitset = ctx.waitset()?;
-    let wakers = [
-        map_sub.waker(),
-        pose_sub.waker(),
-        scan_sub.waker(),
-        tactile_sub.waker(),
-    ];
+    let wakers = [map_sub.waker(), pose_sub.waker()];
     let _attached = wakers
         .iter()
         .map(|w| waitset.attach(w))
@@ -101,8 +98,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         let origin = pose.header.origin_ns;
-        grid_pub.publish(tick, origin, |grid| maps.frontier.write(grid))?;
+        // The frontier grid last: it is what wakes planning and the monitor for this step.
         contact_pub.publish(tick, origin, |grid| maps.contact.write(grid))?;
+        grid_pub.publish(tick, origin, |grid| maps.frontier.write(grid))?;
         ctx.count_step();
     }
 }

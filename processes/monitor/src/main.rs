@@ -54,20 +54,16 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("monitor", &args.common)?;
     let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
     let mut truth_sub = ctx.subscriber(topics::WORLD_TRUTH)?;
-    let mut pose_sub = ctx.subscriber(topics::LOCALIZATION_POSE)?;
+    // The truth and the frontier grid wake the monitor; the rest is read on those wake-ups.
+    let mut pose_sub = ctx.passive_subscriber(topics::LOCALIZATION_POSE)?;
     let mut grid_sub = ctx.subscriber(topics::MAPPING_GRID)?;
-    let mut contact_sub = ctx.subscriber(topics::MAPPING_CONTACT)?;
-    let mut particles_sub = ctx.subscriber(topics::LOCALIZATION_PARTICLES)?;
-    let mut plan_sub = ctx.subscriber(topics::PLANNING_STATUS)?;
-    let mut stats_sub = ctx.subscriber(topics::STACK_STATS)?;
+    let mut contact_sub = ctx.passive_subscriber(topics::MAPPING_CONTACT)?;
+    let mut particles_sub = ctx.passive_subscriber(topics::LOCALIZATION_PARTICLES)?;
+    let mut plan_sub = ctx.passive_subscriber(topics::PLANNING_STATUS)?;
+    let mut stats_sub = ctx.passive_subscriber(topics::STACK_STATS)?;
     let mut status_pub = ctx.publisher(topics::MONITOR_STATUS)?;
     let waitset = ctx.waitset()?;
-    let wakers = [
-        map_sub.waker(),
-        truth_sub.waker(),
-        pose_sub.waker(),
-        grid_sub.waker(),
-    ];
+    let wakers = [map_sub.waker(), truth_sub.waker(), grid_sub.waker()];
     let _attached = wakers
         .iter()
         .map(|w| waitset.attach(w))

@@ -52,18 +52,32 @@ fn main() -> ExitCode {
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("planning", &args.common)?;
     let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
-    let mut pose_sub = ctx.subscriber(topics::LOCALIZATION_POSE)?;
-    let mut scan_sub = ctx.subscriber(topics::SENSING_SCAN)?;
-    let mut tactile_sub = ctx.subscriber(topics::SENSING_TACTILE)?;
+    // Realtime steps on each new pose; lockstep also needs the step's grid, which mapping
+    // publishes after the pose, so there the grid alone wakes us. Scan and tactile readings
+    // come before the pose and never need to.
+    let lockstep = ctx.mode() == mole_runtime::ClockMode::Lockstep;
+    let mut pose_sub = if lockstep {
+        ctx.passive_subscriber(topics::LOCALIZATION_POSE)?
+    } else {
+        ctx.subscriber(topics::LOCALIZATION_POSE)?
+    };
+    let mut scan_sub = ctx.passive_subscriber(topics::SENSING_SCAN)?;
+    let mut tactile_sub = ctx.passive_subscriber(topics::SENSING_TACTILE)?;
     let mut grid_sub = ctx.subscriber(topics::MAPPING_GRID)?;
     let mut cmd_pub = ctx.publisher(topics::PLANNING_CMD)?;
     let mut status_pub = ctx.publisher(topics::PLANNING_STATUS)?;
     let waitset = ctx.waitset()?;
-    let wakers = [map_sub.waker(), pose_sub.waker(), grid_sub.waker()];
+    let mut wakers = vec![map_sub.waker(), grid_sub.waker()];
+    if !lockstep {
+        wakers.push(pose_sub.waker());
+    }
     let _attached = wakers
         .iter()
         .map(|w| waitset.attach(w))
         .collect::<Result<Vec<_>, _>>()?;
+    if !lockstep {
+        ctx.anticipate(&waitset, &pose_sub.waker());
+    }
     ctx.ready();
 
     let mut planner = None;

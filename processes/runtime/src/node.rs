@@ -30,6 +30,8 @@ pub enum RuntimeError {
     Wait(String),
     #[error("cannot install the Ctrl-C handler: {0}")]
     Signal(String),
+    #[error("{0}")]
+    Setting(String),
 }
 
 /// The arguments every process takes, from its command line or the environment the launcher
@@ -61,7 +63,13 @@ pub struct BadInput(pub String);
 pub fn exit_code(result: Result<(), Box<dyn std::error::Error>>) -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) if e.is::<BadInput>() => {
+        Err(e)
+            if e.is::<BadInput>()
+                || matches!(
+                    e.downcast_ref::<RuntimeError>(),
+                    Some(RuntimeError::Setting(_))
+                ) =>
+        {
             eprintln!("error: {e}");
             std::process::ExitCode::from(2)
         }
@@ -211,6 +219,29 @@ pub struct Context {
     stats_publisher: Option<Publisher<Stats>>,
     last_stats: Instant,
     steps: u64,
+    spin_lead: Duration,
+}
+
+/// How long before a realtime input is due a process starts looking for it (µs), unless
+/// `MOLE_SPIN_US` says otherwise.
+pub const DEFAULT_SPIN_US: u64 = 0;
+
+/// `MOLE_SPIN_US` as a duration.
+fn spin_lead_from_env() -> Result<Duration, RuntimeError> {
+    match std::env::var("MOLE_SPIN_US") {
+        Err(_) => Ok(Duration::from_micros(DEFAULT_SPIN_US)),
+        Ok(text) => text
+            .trim()
+            .parse::<u64>()
+            .ok()
+            .filter(|us| *us <= 5_000)
+            .map(Duration::from_micros)
+            .ok_or_else(|| {
+                RuntimeError::Setting(format!(
+                    "MOLE_SPIN_US: expected microseconds from 0 to 5000, found `{text}`"
+                ))
+            }),
+    }
 }
 
 impl Context {
@@ -245,6 +276,7 @@ impl Context {
             stats_publisher: None,
             last_stats: Instant::now(),
             steps: 0,
+            spin_lead: spin_lead_from_env()?,
         };
         ctx.stats_publisher = Some(ctx.publisher(topics::STACK_STATS)?);
         Ok(ctx)
@@ -266,6 +298,16 @@ impl Context {
     pub fn seed(&self) -> Option<u64> {
         self.seed
     }
+    /// In realtime, keeps `waitset` awake for `trigger`'s next sample (see
+    /// [`WaitSet::anticipate`]), `MOLE_SPIN_US` µs before it is due (default
+    /// [`DEFAULT_SPIN_US`]; 0 turns it off). Lockstep has no period to anticipate.
+    pub fn anticipate(&self, waitset: &WaitSet, trigger: &Waker) {
+        if self.mode == ClockMode::Realtime && self.rate_hz > 0.0 {
+            let period = Duration::from_secs_f64(1.0 / self.rate_hz);
+            waitset.anticipate(trigger, period, self.spin_lead);
+        }
+    }
+
     /// Whether SIGINT or SIGTERM arrived.
     pub fn shutdown_requested(&self) -> bool {
         self.shutdown.load(Ordering::SeqCst)
@@ -371,6 +413,25 @@ impl Context {
 
     /// A subscriber on `topic`, with the listener its WaitSet sleeps on.
     pub fn subscriber<M: Message>(&self, topic: Topic<M>) -> Result<Subscriber<M>, RuntimeError> {
+        self.subscriber_with(topic, true)
+    }
+
+    /// A subscriber on `topic` that never wakes the process: it is read when another input
+    /// wakes it. Publishers do not signal it, which saves them a system call per message; use
+    /// it for inputs that arrive before the process's trigger (sensing publishes odom last, so
+    /// localization reads the fix and the beacons passively).
+    pub fn passive_subscriber<M: Message>(
+        &self,
+        topic: Topic<M>,
+    ) -> Result<Subscriber<M>, RuntimeError> {
+        self.subscriber_with(topic, false)
+    }
+
+    fn subscriber_with<M: Message>(
+        &self,
+        topic: Topic<M>,
+        wakes: bool,
+    ) -> Result<Subscriber<M>, RuntimeError> {
         let (pubsub, event) = self.open_services(&topic)?;
         let port_failed =
             |e: String| RuntimeError::Port(format!("subscriber on {}: {e}", topic.name));
@@ -379,18 +440,23 @@ impl Context {
             .buffer_size(topic.buffer)
             .create()
             .map_err(|e| port_failed(format!("{e:?}")))?;
-        let listener = event
-            .listener_builder()
-            .create()
-            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let listener = if wakes {
+            let listener = event
+                .listener_builder()
+                .create()
+                .map_err(|e| port_failed(format!("{e:?}")))?;
+            Some(Rc::new(listener))
+        } else {
+            None
+        };
         let stats = self
             .stats
             .register(topic.name, false)
             .map_err(|e| port_failed(format!("{e:?}")))?;
         Ok(Subscriber {
             topic: topic.name,
-            subscriber,
-            listener: Rc::new(listener),
+            subscriber: Rc::new(subscriber),
+            listener,
             stats,
             latest: None,
             last_seq: None,
@@ -407,6 +473,7 @@ impl Context {
         Ok(WaitSet {
             waitset,
             listeners: core::cell::RefCell::new(Vec::new()),
+            anticipation: core::cell::RefCell::new(None),
         })
     }
 
@@ -503,6 +570,31 @@ pub struct WaitSet {
     /// Every attached listener: drained on each wake-up, so a topic the process no longer
     /// reads (world/map after the first sample) cannot keep the WaitSet awake.
     listeners: core::cell::RefCell<Vec<Rc<iceoryx2::port::listener::Listener<ipc::Service>>>>,
+    anticipation: core::cell::RefCell<Option<Anticipation>>,
+}
+
+/// A periodic input the WaitSet is awake for (see [`WaitSet::anticipate`]).
+struct Anticipation {
+    trigger: Rc<dyn crate::ports::Probe>,
+    period: Duration,
+    lead: Duration,
+    /// When the trigger's last sample was seen.
+    last: core::cell::Cell<Option<Instant>>,
+}
+
+impl Anticipation {
+    /// The polling window around the trigger's next sample: `lead` before it is due until
+    /// `lead / 2` after. A window already past moves on by whole periods.
+    fn window(&self, now: Instant) -> Option<(Instant, Instant)> {
+        let mut due = self.last.get()? + self.period;
+        let after = self.lead / 2;
+        if now > due + after {
+            let late = (now - (due + after)).as_nanos();
+            let periods = late / self.period.as_nanos().max(1) + 1;
+            due += self.period * u32::try_from(periods).unwrap_or(u32::MAX);
+        }
+        Some((due.checked_sub(self.lead)?, due + after))
+    }
 }
 
 /// Keeps a subscriber attached to a [`WaitSet`] while it lives.
@@ -513,12 +605,42 @@ pub struct Attachment<'w, 'a> {
 impl WaitSet {
     /// Wakes this WaitSet whenever the waker's topic is published.
     pub fn attach<'w, 'a>(&'w self, waker: &'a Waker) -> Result<Attachment<'w, 'a>, RuntimeError> {
+        let Some(listener) = &waker.listener else {
+            return Err(RuntimeError::Wait(format!(
+                "{} was opened passive: it cannot wake a WaitSet",
+                waker.topic
+            )));
+        };
         let guard = self
             .waitset
-            .attach_notification(&*waker.listener)
+            .attach_notification(&**listener)
             .map_err(|e| RuntimeError::Wait(format!("attach {}: {e:?}", waker.topic)))?;
-        self.listeners.borrow_mut().push(waker.listener.clone());
+        self.listeners.borrow_mut().push(listener.clone());
         Ok(Attachment { _guard: guard })
+    }
+
+    /// Be awake when `trigger`'s next sample is due instead of paying a wake-up from idle for
+    /// it: a realtime input arrives once a `period`, so from `lead` before it is due the
+    /// WaitSet looks at the trigger's queue in shared memory (yielding the CPU between looks)
+    /// instead of sleeping, until `lead / 2` after; a later sample wakes it as usual. A zero
+    /// `lead` turns it off. Costs about 1.5 × `lead` of CPU per period.
+    pub fn anticipate(&self, trigger: &Waker, period: Duration, lead: Duration) {
+        *self.anticipation.borrow_mut() =
+            (!lead.is_zero() && !period.is_zero()).then(|| Anticipation {
+                trigger: trigger.probe.clone(),
+                period,
+                lead,
+                last: core::cell::Cell::new(None),
+            });
+    }
+
+    /// Consumes the wake-up signals of every attached listener.
+    fn drain_listeners(&self) {
+        // Before the caller reads the samples: a sample that arrives after this point leaves
+        // its signal pending for the next wait.
+        for listener in self.listeners.borrow().iter() {
+            let _ = listener.try_wait(|_| {});
+        }
     }
 
     /// Sleeps until data, `deadline` (if any) or a shutdown; publishes the statistics on the
@@ -534,7 +656,43 @@ impl WaitSet {
             if until_deadline == Some(Duration::ZERO) {
                 return Ok(Wake::Timeout);
             }
-            let timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));
+            // iceoryx2's WaitSet waits in whole milliseconds, rounded up (epoll): the last
+            // fraction of a deadline is slept precisely, so a 100 Hz world ticks on time.
+            if let Some(left) = until_deadline
+                && left < Duration::from_millis(1)
+            {
+                std::thread::sleep(left);
+                return Ok(Wake::Timeout);
+            }
+            let mut timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));
+            let anticipation = self.anticipation.borrow();
+            if let Some(a) = anticipation.as_ref()
+                && let Some((from, until)) = a.window(now)
+            {
+                if now >= from {
+                    let end = deadline.map_or(until, |d| d.min(until));
+                    while Instant::now() < end && !ctx.shutdown_requested() {
+                        if a.trigger.has_data() {
+                            a.last.set(Some(Instant::now()));
+                            self.drain_listeners();
+                            return Ok(Wake::Data);
+                        }
+                        std::thread::yield_now();
+                    }
+                    continue;
+                }
+                // iceoryx2's WaitSet waits in whole milliseconds, rounded up (epoll): sleep the
+                // last fraction precisely, or the window would open up to 1 ms late.
+                let until_from = from - now;
+                if until_from <= Duration::from_millis(1) {
+                    drop(anticipation);
+                    std::thread::sleep(until_from);
+                    continue;
+                }
+                timeout = timeout.min(Duration::from_millis(until_from.as_millis() as u64));
+            }
+            drop(anticipation);
+            let timeout = Duration::from_millis(timeout.as_millis().max(1) as u64);
             let mut woke = false;
             let result = self
                 .waitset
@@ -555,13 +713,67 @@ impl WaitSet {
                 WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {}
             }
             if woke {
-                // Consume the wake-up signals before the caller reads the samples: a sample
-                // that arrives after this point leaves its signal pending for the next wait.
-                for listener in self.listeners.borrow().iter() {
-                    let _ = listener.try_wait(|_| {});
+                if let Some(a) = self.anticipation.borrow().as_ref()
+                    && a.trigger.has_data()
+                {
+                    a.last.set(Some(Instant::now()));
                 }
+                self.drain_listeners();
                 return Ok(Wake::Data);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Never;
+    impl crate::ports::Probe for Never {
+        fn has_data(&self) -> bool {
+            false
+        }
+    }
+
+    fn anticipation(lead_us: u64) -> Anticipation {
+        Anticipation {
+            trigger: Rc::new(Never),
+            period: Duration::from_millis(10),
+            lead: Duration::from_micros(lead_us),
+            last: core::cell::Cell::new(None),
+        }
+    }
+
+    #[test]
+    fn the_window_opens_lead_before_the_next_sample_and_moves_on_by_whole_periods() {
+        let a = anticipation(200);
+        let t0 = Instant::now();
+        assert_eq!(
+            a.window(t0),
+            None,
+            "nothing seen yet, nothing to anticipate"
+        );
+        a.last.set(Some(t0));
+        let ms = Duration::from_millis;
+        let us = Duration::from_micros;
+        assert_eq!(
+            a.window(t0 + ms(3)),
+            Some((t0 + ms(10) - us(200), t0 + ms(10) + us(100)))
+        );
+        // Inside the window it stays put; past it, the next period's window comes.
+        assert_eq!(
+            a.window(t0 + ms(10)).map(|w| w.0),
+            Some(t0 + ms(10) - us(200))
+        );
+        assert_eq!(
+            a.window(t0 + ms(10) + us(101)).map(|w| w.0),
+            Some(t0 + ms(20) - us(200))
+        );
+        assert_eq!(
+            a.window(t0 + ms(35)).map(|w| w.0),
+            Some(t0 + ms(40) - us(200)),
+            "three periods without the trigger"
+        );
     }
 }

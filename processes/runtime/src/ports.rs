@@ -86,8 +86,10 @@ impl<M: Message> Publisher<M> {
 /// A typed subscriber bound to one topic.
 pub struct Subscriber<M: Message> {
     pub(crate) topic: &'static str,
-    pub(crate) subscriber: iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()>,
-    pub(crate) listener: Rc<Listener<ipc::Service>>,
+    /// Shared with the [`Waker`], which probes it while a WaitSet anticipates an input.
+    pub(crate) subscriber: Rc<iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()>>,
+    /// `None` for a passive subscriber: no publisher signals it.
+    pub(crate) listener: Option<Rc<Listener<ipc::Service>>>,
     pub(crate) stats: PortHandle,
     pub(crate) latest: Option<Sample<ipc::Service, M, ()>>,
     pub(crate) last_seq: Option<u64>,
@@ -149,11 +151,13 @@ impl<M: Message> Subscriber<M> {
     }
 
     /// A handle that wakes a [`crate::WaitSet`] when this topic is published; attach it with
-    /// [`crate::WaitSet::attach`] (the subscriber itself stays free to be drained).
+    /// [`crate::WaitSet::attach`] (the subscriber itself stays free to be drained). Attaching
+    /// the waker of a passive subscriber fails.
     pub fn waker(&self) -> Waker {
         Waker {
             topic: self.topic,
             listener: self.listener.clone(),
+            probe: self.subscriber.clone(),
         }
     }
 
@@ -203,5 +207,17 @@ impl<M: Message> Subscriber<M> {
 /// The wake-up side of a subscriber: the listener of the topic's event service.
 pub struct Waker {
     pub(crate) topic: &'static str,
-    pub(crate) listener: Rc<Listener<ipc::Service>>,
+    pub(crate) listener: Option<Rc<Listener<ipc::Service>>>,
+    pub(crate) probe: Rc<dyn Probe>,
+}
+
+/// Whether a subscriber's queue holds a sample: a look at shared memory, no system call.
+pub(crate) trait Probe {
+    fn has_data(&self) -> bool;
+}
+
+impl<M: Message> Probe for iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()> {
+    fn has_data(&self) -> bool {
+        self.has_samples().unwrap_or(false)
+    }
 }

@@ -35,6 +35,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let waitset = ctx.waitset()?;
     let (map_wake, truth_wake) = (map_sub.waker(), truth_sub.waker());
     let _attached = (waitset.attach(&map_wake)?, waitset.attach(&truth_wake)?);
+    ctx.anticipate(&waitset, &truth_wake);
     ctx.ready();
 
     let mut sensing: Option<Sensing> = None;

@@ -66,6 +66,8 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
     let waitset = ctx.waitset()?;
     let cmd_wake = cmd_sub.waker();
     let _cmd_attached = waitset.attach(&cmd_wake)?;
+    // The command closes the control loop: be awake for it (realtime).
+    ctx.anticipate(&waitset, &cmd_wake);
 
     let mut world = World::new(scenario);
     let dt = scenario.dt;
