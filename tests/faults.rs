@@ -391,3 +391,28 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
     let leftovers = left_behind(&before);
     assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
 }
+
+#[test]
+fn a_killed_world_ends_the_run_as_failed_because_its_policy_never_restarts_it() {
+    let _serial = serial();
+    let before = shm_files();
+    let stack = Stack::start("kill-world", &["--mode", "realtime", "--ticks", "100000"]);
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(500));
+    let world = pid_of(&stack.namespace, "mole-world").expect("mole-world runs");
+    signal(world, nix::sys::signal::Signal::SIGKILL);
+    let out = stack.out.clone();
+    let keep = out.with_extension("kept");
+    let output = stack.wait_and_copy(&keep, Duration::from_secs(60));
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    let summary = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("`world` exited (signal 9") && stderr.contains("does not restart it"),
+        "{stderr}"
+    );
+    assert_eq!(summary["exit_reason"], "process_failed", "{summary:#}");
+    let leftovers = left_behind(&before);
+    assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
+}

@@ -1,5 +1,6 @@
 //! Hot swap through `mole swap` (stack/control): lockstep loses and repeats no step, realtime
-//! reports its gap, and every refusal leaves the running stack untouched.
+//! reports its gap, and every refusal leaves the running stack untouched. The realtime run also
+//! checks that iceoryx2's service listing shows every topic with its type name.
 
 use mole_integration_tests::*;
 use std::process::Output;
@@ -102,6 +103,15 @@ fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
         "{}",
         text(&out)
     );
+    // Every topic of the stack is an iceoryx2 service listed with its documented type name
+    // (what `iox2 service list` shows).
+    let listed = mole_runtime::list_topics(&stack.namespace);
+    for (topic, type_name) in mole_types::topics::ALL {
+        assert!(
+            listed.contains(&(topic.to_string(), type_name.to_string())),
+            "{topic} ({type_name}) is not listed: {listed:?}"
+        );
+    }
     let keep = std::env::temp_dir().join(format!("mole-keep-{}", stack.namespace));
     let output = stack.wait_and_copy(&keep, Duration::from_secs(120));
     assert!(output.status.success(), "{}", logs(&keep));

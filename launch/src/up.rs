@@ -427,6 +427,22 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
                         );
                         // Release what the dead process held before its successor starts.
                         cleanup_dead_nodes();
+                        let restarted = match launch.process(&role).map(|p| p.restart.policy) {
+                            Some(RestartWhen::Always) => true,
+                            Some(RestartWhen::OnFailure) => !status.success(),
+                            _ => false,
+                        };
+                        // Exit code 2 ends the run through GaveUp; anything else that no policy
+                        // restarts leaves the stack without the role: the run cannot go on.
+                        if !restarted && status != ExitStatus::Code(EXIT_BAD_INPUT) {
+                            let log = args.out.join("logs").join(format!("{role}.log"));
+                            failure = Some(Failure::run(format!(
+                                "`{role}` exited ({status}) and its restart policy does not \
+                                 restart it, so the run cannot go on (see {})",
+                                log.display()
+                            )));
+                            exit_reason = Some(Some("process_failed"));
+                        }
                     }
                 }
                 SupervisorEvent::Restarted { role, attempt } => {
