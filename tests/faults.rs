@@ -2,11 +2,9 @@
 //! a killed stack, a hundred kill-and-restart cycles, and who may open the stack's memory.
 
 use mole_integration_tests::*;
-use mole_runtime::{ClockMode, CommonArgs, Context, Publisher};
+use mole_runtime::Publisher;
 use mole_types::{Message, topics};
 use std::os::unix::process::CommandExt;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 /// xorshift64*: reproducible garbage.
@@ -38,14 +36,7 @@ fn random_bytes_on_every_topic_crash_nothing_and_are_counted() {
     let _serial = serial();
     let stack = Stack::start("rogue", &["--mode", "realtime", "--ticks", "700"]);
     stack.wait_for_log("world", "ready", Duration::from_secs(60));
-    let args = CommonArgs {
-        namespace: stack.namespace.clone(),
-        mode: ClockMode::Realtime,
-        rate_hz: 100.0,
-        seed: None,
-    };
-    let rogue = Context::with_shutdown_flag("rogue", &args, Arc::new(AtomicBool::new(false)))
-        .expect("rogue context");
+    let rogue = join_realtime_stack(&stack.namespace, "rogue");
     let mut garbage = Garbage(0x9E37_79B9_7F4A_7C15);
     let mut truth = rogue.publisher(topics::WORLD_TRUTH).unwrap();
     let mut scan = rogue.publisher(topics::SENSING_SCAN).unwrap();

@@ -4,12 +4,9 @@
 //! the stack's version (`scripts/python-env.sh` installs it; `.ci/run` calls it).
 
 use mole_integration_tests::*;
-use mole_runtime::{ClockMode, CommonArgs, Context};
 use mole_types::{DIRECTION_PUBLISH, read_name, topics};
 use std::collections::BTreeMap;
 use std::process::Command;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 const RUN_TIMEOUT: Duration = Duration::from_secs(240);
@@ -182,14 +179,7 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
         ],
     );
     stack.wait_for_log("planning", "ready", Duration::from_secs(60));
-    let args = CommonArgs {
-        namespace: stack.namespace.clone(),
-        mode: ClockMode::Realtime,
-        rate_hz: 100.0,
-        seed: None,
-    };
-    let observer = Context::with_shutdown_flag("observer", &args, Arc::new(AtomicBool::new(false)))
-        .expect("observer context");
+    let observer = join_realtime_stack(&stack.namespace, "observer");
     let mut stats_sub = observer.subscriber(topics::STACK_STATS).expect("stats");
     // Watch until a window of a second shows the planner commanding at the world's rate, and
     // one more window came.

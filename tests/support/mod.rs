@@ -313,3 +313,16 @@ pub fn left_behind(before: &[String]) -> Vec<String> {
         .filter(|f| !before.contains(f))
         .collect()
 }
+
+/// A context of the test's own in a running realtime stack (a rogue publisher, an observer).
+pub fn join_realtime_stack(namespace: &str, role: &str) -> mole_runtime::Context {
+    let args = mole_runtime::CommonArgs {
+        namespace: namespace.to_string(),
+        mode: mole_runtime::ClockMode::Realtime,
+        rate_hz: 100.0,
+        seed: None,
+    };
+    let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    mole_runtime::Context::with_shutdown_flag(role, &args, shutdown)
+        .unwrap_or_else(|e| panic!("{role} joins {namespace}: {e}"))
+}
