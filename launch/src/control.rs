@@ -21,8 +21,9 @@ pub struct SwapArgs {
     pub timeout: f64,
     /// The role to replace: sensing, localization, mapping or planning.
     pub role: String,
-    /// The new command: its words, or one quoted string split like a shell would.
-    #[arg(required = true, trailing_var_arg = true, allow_hyphen_values = true)]
+    /// The new command, quoted when it has arguments ("mole-planning --planner apf"); it is
+    /// split like a shell would split it. Options of `mole swap` may follow it.
+    #[arg(required = true)]
     pub command: Vec<String>,
 }
 
