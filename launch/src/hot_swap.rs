@@ -184,6 +184,14 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
                  (pid {old_pid}) keeps running; see its log"
             )));
         }
+        if env.ctx.shutdown_requested() {
+            env.supervisor.abandon_replacement(&role);
+            cleanup_dead_nodes();
+            return Err(SwapError::Failed(format!(
+                "interrupted: the new `{role}` process was stopped, the old one (pid {old_pid}) \
+                 keeps running until the stack stops"
+            )));
+        }
         if Instant::now() >= deadline {
             env.supervisor.abandon_replacement(&role);
             cleanup_dead_nodes();
