@@ -119,15 +119,15 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
             tracing::info!(tick, "stopped");
             return Ok(());
         }
-        let mut fresh: Option<(u64, f64, f64, u64)> = None;
-        cmd_sub.drain(|cmd| {
-            // The highest tick wins: during a hot swap the old planner may answer an older
-            // step after the new one answered this one.
-            if fresh.is_none_or(|(t, ..)| cmd.header.tick >= t) {
-                fresh = Some((cmd.header.tick, cmd.v, cmd.omega, cmd.header.origin_ns));
+        // Newest by tick (Subscriber::update): a late answer to an older step never wins.
+        let fresh = if cmd_sub.update() {
+            cmd_sub.latest().map(|cmd| {
                 exploration_complete = cmd.mode == MODE_DONE;
-            }
-        });
+                (cmd.header.tick, cmd.v, cmd.omega, cmd.header.origin_ns)
+            })
+        } else {
+            None
+        };
         if let Some((cmd_tick, v, omega, origin)) = fresh {
             command = (v, omega);
             command_latency_ns = now_ns().saturating_sub(origin);
