@@ -295,12 +295,7 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     let mut failure = None;
     while exit_reason.is_none() {
         std::thread::sleep(POLL);
-        stats_sub.drain(|s| {
-            let role = read_name(&s.process).into_owned();
-            last_heard.insert(role.clone(), Instant::now());
-            ready.insert(role);
-            collector.record(s);
-        });
+        stats_sub.drain(|s| record_stats(s, &mut last_heard, &mut ready, &mut collector));
         if let Some(call) = control.receive() {
             let request = *call.request();
             match request.op {
@@ -320,12 +315,8 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
                     call.respond(|r| write_name(&mut r.text, &line));
                 }
                 _ => {
-                    let mut on_stats = |s: &Stats| {
-                        let role = read_name(&s.process).into_owned();
-                        last_heard.insert(role.clone(), Instant::now());
-                        ready.insert(role);
-                        collector.record(s);
-                    };
+                    let mut on_stats =
+                        |s: &Stats| record_stats(s, &mut last_heard, &mut ready, &mut collector);
                     let result =
                         swap_spec(&launch, &supervisor, &request, &beside).and_then(|spec| {
                             hot_swap(
@@ -353,22 +344,7 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
                         Ok(_) => tracing::info!("{line}"),
                         Err(_) => tracing::warn!("swap not done: {line}"),
                     });
-                    call.respond(|r| {
-                        match &result {
-                            Ok(report) => {
-                                r.status = CONTROL_OK;
-                                r.pid = report.pid;
-                                r.gap_ns = report.gap.as_nanos() as u64;
-                                r.period_ns = report.period.as_nanos() as u64;
-                                r.steps_lost = report.steps_lost;
-                                r.steps_repeated = report.steps_repeated;
-                                r.tick = report.tick;
-                            }
-                            Err(SwapError::Refused(_)) => r.status = CONTROL_REFUSED,
-                            Err(SwapError::Failed(_)) => r.status = CONTROL_FAILED,
-                        }
-                        write_name(&mut r.text, &line);
-                    });
+                    call.respond(|r| write_swap_response(r, &result, &line));
                 }
             }
         }
@@ -577,6 +553,41 @@ fn swap_spec(
     spec.args = arguments.to_vec();
     spec.cwd = Some(cwd);
     Ok(spec)
+}
+
+/// A process's statistics sample: it is alive (hang detection), ready, and counted.
+fn record_stats(
+    s: &Stats,
+    last_heard: &mut BTreeMap<String, Instant>,
+    ready: &mut BTreeSet<String>,
+    collector: &mut StatsCollector,
+) {
+    let role = read_name(&s.process).into_owned();
+    last_heard.insert(role.clone(), Instant::now());
+    ready.insert(role);
+    collector.record(s);
+}
+
+/// The answer to `mole swap`: its status, what the swap measured, and `line`.
+fn write_swap_response(
+    r: &mut mole_types::ControlResponse,
+    result: &Result<SwapReport, SwapError>,
+    line: &str,
+) {
+    match result {
+        Ok(report) => {
+            r.status = CONTROL_OK;
+            r.pid = report.pid;
+            r.gap_ns = report.gap.as_nanos() as u64;
+            r.period_ns = report.period.as_nanos() as u64;
+            r.steps_lost = report.steps_lost;
+            r.steps_repeated = report.steps_repeated;
+            r.tick = report.tick;
+        }
+        Err(SwapError::Refused(_)) => r.status = CONTROL_REFUSED,
+        Err(SwapError::Failed(_)) => r.status = CONTROL_FAILED,
+    }
+    write_name(&mut r.text, line);
 }
 
 fn swap_sentence(report: &SwapReport, mode: ClockMode) -> String {
