@@ -6,7 +6,7 @@
 
 use clap::Parser;
 use mole_mapping::{ContactGrid, FrontierGrid};
-use mole_runtime::{CommonArgs, Context, StepGate, Wake};
+use mole_runtime::{ClockMode, CommonArgs, Context, StepGate, Wake};
 use mole_types::{Pose2, topics};
 use std::process::ExitCode;
 
@@ -54,6 +54,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
 
     let mut maps: Option<Maps> = None;
     let mut gate = StepGate::new(ctx.mode());
+    let lockstep = ctx.mode() == ClockMode::Lockstep;
     loop {
         if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
             return Ok(());
@@ -71,36 +72,48 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             tracing::info!(width_m = w, height_m = h, resolution = res, "map received");
         }
         let Some(maps) = maps.as_mut() else { continue };
-        pose_sub.update();
-        scan_sub.update();
-        tactile_sub.update();
-        let ticks = [pose_sub.tick(), scan_sub.tick(), tactile_sub.tick()];
-        let Some(tick) = gate.ready(&ticks) else {
-            continue;
-        };
-        let (Some(pose), Some(scan), Some(tactile)) =
-            (pose_sub.latest(), scan_sub.latest(), tactile_sub.latest())
-        else {
-            continue;
-        };
-        let estimate = Pose2::new(pose.x, pose.y, pose.theta);
-        maps.frontier
-            .integrate_footprint(estimate, maps.robot_radius);
-        if scan.header.tick == tick {
-            maps.frontier.integrate_scan(estimate, scan);
-        }
-        if tactile.header.tick == tick {
-            let touched = maps
-                .contact
-                .integrate_tactile(estimate, tactile, args.touch_threshold);
-            for &(x, y) in touched {
-                maps.frontier.mark_occupied(x, y);
+        // Mapping works beside the control loop (planning uses the previous step's grid): in
+        // lockstep it may be a step or two behind, and handles every step, in order.
+        loop {
+            if lockstep {
+                pose_sub.update_next(gate.last());
+                if let Some(k) = pose_sub.tick() {
+                    scan_sub.update_through(k);
+                    tactile_sub.update_through(k);
+                }
+            } else {
+                pose_sub.update();
+                scan_sub.update();
+                tactile_sub.update();
             }
+            let ticks = [pose_sub.tick(), scan_sub.tick(), tactile_sub.tick()];
+            let Some(tick) = gate.ready(&ticks) else {
+                break;
+            };
+            let (Some(pose), Some(scan), Some(tactile)) =
+                (pose_sub.latest(), scan_sub.latest(), tactile_sub.latest())
+            else {
+                break;
+            };
+            let estimate = Pose2::new(pose.x, pose.y, pose.theta);
+            maps.frontier
+                .integrate_footprint(estimate, maps.robot_radius);
+            if scan.header.tick == tick {
+                maps.frontier.integrate_scan(estimate, scan);
+            }
+            if tactile.header.tick == tick {
+                let touched =
+                    maps.contact
+                        .integrate_tactile(estimate, tactile, args.touch_threshold);
+                for &(x, y) in touched {
+                    maps.frontier.mark_occupied(x, y);
+                }
+            }
+            let origin = pose.header.origin_ns;
+            // The frontier grid last: it is what wakes planning and the monitor for this step.
+            contact_pub.publish(tick, origin, |grid| maps.contact.write(grid))?;
+            grid_pub.publish(tick, origin, |grid| maps.frontier.write(grid))?;
+            ctx.count_step();
         }
-        let origin = pose.header.origin_ns;
-        // The frontier grid last: it is what wakes planning and the monitor for this step.
-        contact_pub.publish(tick, origin, |grid| maps.contact.write(grid))?;
-        grid_pub.publish(tick, origin, |grid| maps.frontier.write(grid))?;
-        ctx.count_step();
     }
 }

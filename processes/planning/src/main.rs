@@ -52,40 +52,28 @@ fn main() -> ExitCode {
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("planning", &args.common)?;
     let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
-    // Realtime steps on each new pose; lockstep also needs the step's grid, which mapping
-    // publishes after the pose, so there the grid alone wakes us. Scan and tactile readings
+    // Each new pose starts a step; lockstep also waits for the previous step's grid, which a
+    // late mapping may still be writing, so the grid wakes us too. Scan and tactile readings
     // come before the pose and never need to.
-    let lockstep = ctx.mode() == mole_runtime::ClockMode::Lockstep;
-    let mut pose_sub = if lockstep {
-        ctx.passive_subscriber(topics::LOCALIZATION_POSE)?
-    } else {
-        ctx.subscriber(topics::LOCALIZATION_POSE)?
-    };
+    let lockstep = ctx.mode() == ClockMode::Lockstep;
+    let mut pose_sub = ctx.subscriber(topics::LOCALIZATION_POSE)?;
     let mut scan_sub = ctx.passive_subscriber(topics::SENSING_SCAN)?;
     let mut tactile_sub = ctx.passive_subscriber(topics::SENSING_TACTILE)?;
     let mut grid_sub = ctx.subscriber(topics::MAPPING_GRID)?;
     let mut cmd_pub = ctx.publisher(topics::PLANNING_CMD)?;
     let mut status_pub = ctx.publisher(topics::PLANNING_STATUS)?;
     let waitset = ctx.waitset()?;
-    let mut wakers = vec![map_sub.waker(), grid_sub.waker()];
-    if !lockstep {
-        wakers.push(pose_sub.waker());
-    }
+    let wakers = [map_sub.waker(), grid_sub.waker(), pose_sub.waker()];
     let _attached = wakers
         .iter()
         .map(|w| waitset.attach(w))
         .collect::<Result<Vec<_>, _>>()?;
-    if !lockstep {
-        ctx.anticipate(&waitset, &pose_sub.waker());
-    }
+    ctx.anticipate(&waitset, &wakers[2]);
     ctx.ready();
 
     let mut planner = None;
     let mut dt = 0.01;
     let mut gate = StepGate::new(ctx.mode());
-    // Realtime reacts to the pose at once with the newest grid; lockstep also waits for this
-    // step's grid, so that the same seed gives the same run.
-    let lockstep = ctx.mode() == ClockMode::Lockstep;
     loop {
         if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
             return Ok(());
@@ -115,11 +103,23 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         pose_sub.update();
         scan_sub.update();
         tactile_sub.update();
-        grid_sub.update();
-        let grid_tick = if lockstep {
-            grid_sub.tick()
+        // Lockstep plans step k on the grid of step k−1, as realtime does in practice: mapping
+        // then works beside the control loop instead of inside it. Step 0 has no grid yet.
+        let grid_through = if lockstep {
+            pose_sub.tick().and_then(|k| k.checked_sub(1))
         } else {
-            pose_sub.tick()
+            None
+        };
+        let grid_tick = match (lockstep, grid_through) {
+            (false, _) => {
+                grid_sub.update();
+                pose_sub.tick()
+            }
+            (true, Some(previous)) => {
+                grid_sub.update_through(previous);
+                grid_sub.tick().map(|g| g + 1)
+            }
+            (true, None) => pose_sub.tick(),
         };
         let ticks = [
             pose_sub.tick(),
@@ -139,7 +139,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             pose: Pose2::new(pose.x, pose.y, pose.theta),
             scan: scan_sub.latest().filter(|s| s.header.tick == tick),
             tactile: tactile_sub.latest().filter(|t| t.header.tick == tick),
-            grid: grid_sub.latest(),
+            grid: grid_sub
+                .latest()
+                .filter(|_| !lockstep || grid_through.is_some()),
         };
         let command = planner.step(&input);
         let origin = pose.header.origin_ns;

@@ -298,14 +298,19 @@ impl Context {
     pub fn seed(&self) -> Option<u64> {
         self.seed
     }
-    /// In realtime, keeps `waitset` awake for `trigger`'s next sample (see
-    /// [`WaitSet::anticipate`]), `MOLE_SPIN_US` µs before it is due (default
-    /// [`DEFAULT_SPIN_US`]; 0 turns it off). Lockstep has no period to anticipate.
+    /// Keeps `waitset` awake for `trigger`'s next sample (see [`WaitSet::anticipate`]) for
+    /// `MOLE_SPIN_US` µs (default [`DEFAULT_SPIN_US`]; 0 turns it off): in realtime from that
+    /// long before the sample is due, in lockstep for that long after the last one, since the
+    /// next step comes as soon as the stack has gone round once.
     pub fn anticipate(&self, waitset: &WaitSet, trigger: &Waker) {
-        if self.mode == ClockMode::Realtime && self.rate_hz > 0.0 {
-            let period = Duration::from_secs_f64(1.0 / self.rate_hz);
-            waitset.anticipate(trigger, period, self.spin_lead);
-        }
+        let period = match self.mode {
+            ClockMode::Realtime if self.rate_hz > 0.0 => {
+                Duration::from_secs_f64(1.0 / self.rate_hz)
+            }
+            ClockMode::Realtime => return,
+            ClockMode::Lockstep => Duration::ZERO,
+        };
+        waitset.anticipate(trigger, period, self.spin_lead);
     }
 
     /// Whether SIGINT or SIGTERM arrived.
@@ -459,6 +464,7 @@ impl Context {
             listener,
             stats,
             latest: None,
+            pending: None,
             last_seq: None,
             last_warning: None,
         })
@@ -586,6 +592,11 @@ impl Anticipation {
     /// The polling window around the trigger's next sample: `lead` before it is due until
     /// `lead / 2` after. A window already past moves on by whole periods.
     fn window(&self, now: Instant) -> Option<(Instant, Instant)> {
+        if self.period.is_zero() {
+            // Lockstep: the next sample is due as soon as the stack has gone round once.
+            let last = self.last.get()?;
+            return (now < last + self.lead).then_some((last, last + self.lead));
+        }
         let mut due = self.last.get()? + self.period;
         let after = self.lead / 2;
         if now > due + after {
@@ -623,15 +634,15 @@ impl WaitSet {
     /// it: a realtime input arrives once a `period`, so from `lead` before it is due the
     /// WaitSet looks at the trigger's queue in shared memory (yielding the CPU between looks)
     /// instead of sleeping, until `lead / 2` after; a later sample wakes it as usual. A zero
-    /// `lead` turns it off. Costs about 1.5 × `lead` of CPU per period.
+    /// `period` (lockstep) looks from the last sample until `lead` after it. A zero `lead`
+    /// turns it off. Costs about 1.5 × `lead` of CPU per period.
     pub fn anticipate(&self, trigger: &Waker, period: Duration, lead: Duration) {
-        *self.anticipation.borrow_mut() =
-            (!lead.is_zero() && !period.is_zero()).then(|| Anticipation {
-                trigger: trigger.probe.clone(),
-                period,
-                lead,
-                last: core::cell::Cell::new(None),
-            });
+        *self.anticipation.borrow_mut() = (!lead.is_zero()).then(|| Anticipation {
+            trigger: trigger.probe.clone(),
+            period,
+            lead,
+            last: core::cell::Cell::new(None),
+        });
     }
 
     /// Consumes the wake-up signals of every attached listener.
@@ -737,9 +748,13 @@ mod tests {
     }
 
     fn anticipation(lead_us: u64) -> Anticipation {
+        anticipation_every(Duration::from_millis(10), lead_us)
+    }
+
+    fn anticipation_every(period: Duration, lead_us: u64) -> Anticipation {
         Anticipation {
             trigger: Rc::new(Never),
-            period: Duration::from_millis(10),
+            period,
             lead: Duration::from_micros(lead_us),
             last: core::cell::Cell::new(None),
         }
@@ -775,5 +790,16 @@ mod tests {
             Some(t0 + ms(40) - us(200)),
             "three periods without the trigger"
         );
+    }
+
+    #[test]
+    fn in_lockstep_the_window_follows_the_last_sample() {
+        let a = anticipation_every(Duration::ZERO, 300);
+        let t0 = Instant::now();
+        let us = Duration::from_micros;
+        assert_eq!(a.window(t0), None, "nothing seen yet");
+        a.last.set(Some(t0));
+        assert_eq!(a.window(t0 + us(100)), Some((t0, t0 + us(300))));
+        assert_eq!(a.window(t0 + us(300)), None, "then it sleeps until woken");
     }
 }

@@ -92,6 +92,8 @@ pub struct Subscriber<M: Message> {
     pub(crate) listener: Option<Rc<Listener<ipc::Service>>>,
     pub(crate) stats: PortHandle,
     pub(crate) latest: Option<Sample<ipc::Service, M, ()>>,
+    /// A sample newer than [`Subscriber::update_through`] asked for, held for a later call.
+    pub(crate) pending: Option<Sample<ipc::Service, M, ()>>,
     pub(crate) last_seq: Option<u64>,
     pub(crate) last_warning: Option<Instant>,
 }
@@ -104,7 +106,7 @@ impl<M: Message> Subscriber<M> {
     /// poller pays only for reading shared memory.
     pub fn drain(&mut self, mut on_message: impl FnMut(&M)) -> usize {
         let mut valid = 0;
-        while let Some(sample) = self.next_valid() {
+        while let Some(sample) = self.pending.take().or_else(|| self.next_valid()) {
             on_message(sample.payload());
             self.latest = Some(sample);
             valid += 1;
@@ -119,12 +121,25 @@ impl<M: Message> Subscriber<M> {
     /// old one may still send step k−1 after the new one sent step k, and a lockstep consumer
     /// that took the late k−1 would wait for a step k nobody sends again.
     pub fn update(&mut self) -> bool {
+        self.update_through(u64::MAX)
+    }
+
+    /// [`Subscriber::update`] up to step `tick`: keeps the newest valid message whose tick is
+    /// at most `tick`. A newer one stays held, unread, for a later call, so a consumer that
+    /// must use step k−1 (lockstep planning) is not handed step k because it came early.
+    /// At most two samples are held at a time: the latest and the pending one.
+    pub fn update_through(&mut self, tick: u64) -> bool {
         let mut fresh = false;
-        while let Some(sample) = self.next_valid() {
-            if self
-                .tick()
-                .is_some_and(|newest| sample.payload().header().tick < newest)
-            {
+        loop {
+            let Some(sample) = self.pending.take().or_else(|| self.next_valid()) else {
+                break;
+            };
+            let sample_tick = sample.payload().header().tick;
+            if sample_tick > tick {
+                self.pending = Some(sample);
+                break;
+            }
+            if self.tick().is_some_and(|newest| sample_tick < newest) {
                 continue;
             }
             // Release the older sample before keeping the newer one.
@@ -133,6 +148,25 @@ impl<M: Message> Subscriber<M> {
             fresh = true;
         }
         fresh
+    }
+
+    /// Lockstep, for a consumer that may run behind the loop: moves on to the oldest message
+    /// newer than step `after` (`None`: the oldest there is) and leaves the rest queued, so
+    /// that every step is handled, in order. Older ones (resends) are dropped. Returns whether
+    /// the message now held is newer than `after`; one already held is kept.
+    pub fn update_next(&mut self, after: Option<u64>) -> bool {
+        let newer = |tick: u64| after.is_none_or(|a| tick > a);
+        if self.tick().is_some_and(newer) {
+            return true;
+        }
+        while let Some(sample) = self.pending.take().or_else(|| self.next_valid()) {
+            if newer(sample.payload().header().tick) {
+                self.latest = None;
+                self.latest = Some(sample);
+                return true;
+            }
+        }
+        false
     }
 
     /// The newest valid message received so far.

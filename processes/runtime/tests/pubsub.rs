@@ -100,6 +100,62 @@ fn invalid_messages_are_dropped_and_counted() {
     assert!(!cmd_sub.update(), "nothing new");
 }
 
+/// Publishes a valid command for each tick, in this order.
+fn publish_cmds(cmd_pub: &mut mole_runtime::Publisher<mole_types::Cmd>, ticks: &[u64]) {
+    for &tick in ticks {
+        cmd_pub
+            .publish(tick, 0, |c| {
+                c.v = 0.1;
+                c.omega = 0.0;
+                c.mode = 0;
+                c._pad = 0;
+            })
+            .unwrap();
+    }
+}
+
+#[test]
+fn update_through_holds_back_a_step_that_came_early() {
+    let args = args("through", ClockMode::Lockstep);
+    let producer = context("producer", &args);
+    let consumer = context("consumer", &args);
+    let mut cmd_pub = producer.publisher(topics::PLANNING_CMD).unwrap();
+    let mut cmd_sub = consumer.subscriber(topics::PLANNING_CMD).unwrap();
+    publish_cmds(&mut cmd_pub, &[3, 4, 5]);
+    assert!(cmd_sub.update_through(3));
+    assert_eq!(cmd_sub.tick(), Some(3), "4 and 5 came early and wait");
+    assert!(!cmd_sub.update_through(3), "nothing new up to 3");
+    assert!(cmd_sub.update_through(4));
+    assert_eq!(cmd_sub.tick(), Some(4));
+    // A plain update takes the held-back and queued ones: the newest by tick.
+    publish_cmds(&mut cmd_pub, &[6]);
+    assert!(cmd_sub.update());
+    assert_eq!(cmd_sub.tick(), Some(6));
+}
+
+#[test]
+fn update_next_takes_every_step_in_order_and_drops_resends() {
+    let args = args("next", ClockMode::Lockstep);
+    let producer = context("producer", &args);
+    let consumer = context("consumer", &args);
+    let mut cmd_pub = producer.publisher(topics::PLANNING_CMD).unwrap();
+    let mut cmd_sub = consumer.subscriber(topics::PLANNING_CMD).unwrap();
+    assert!(!cmd_sub.update_next(None), "nothing yet");
+    publish_cmds(&mut cmd_pub, &[0, 1, 1, 2]);
+    assert!(cmd_sub.update_next(None));
+    assert_eq!(cmd_sub.tick(), Some(0), "the oldest first, not the newest");
+    assert!(
+        cmd_sub.update_next(None),
+        "a step not handled yet is kept, not skipped"
+    );
+    assert_eq!(cmd_sub.tick(), Some(0));
+    let mut handled = vec![0];
+    while cmd_sub.update_next(handled.last().copied()) {
+        handled.push(cmd_sub.tick().unwrap());
+    }
+    assert_eq!(handled, [0, 1, 2], "the resent 1 was dropped");
+}
+
 #[test]
 fn late_subscribers_get_the_world_map_from_history() {
     let args = args("history", ClockMode::Realtime);
