@@ -177,6 +177,29 @@ fn coverage_is_the_explored_fraction_of_the_reachable_cells() {
 }
 
 #[test]
+fn coverage_milestones_are_checked_every_ten_steps_and_on_the_last_grid() {
+    let mut m = Monitor::new(&walled_world(0.1)).unwrap();
+    // Reachable: cols 0-10 less the block, 84 cells; `cols` explored columns from col 0.
+    let explored = |tick: u64, cols: usize| {
+        let mut g = grid(GRID_FRONTIER, 16, 8, 0.25, |col, _| u8::from(col < cols));
+        g.header.tick = tick;
+        g
+    };
+    m.on_grid(&explored(7, 6)); // 48 of 84: below 50%
+    m.on_grid(&explored(13, 8)); // 50% passed here, but 13 is not checked
+    m.on_grid(&explored(20, 8));
+    m.on_grid(&explored(23, 11)); // 100%, the last grid of the run
+    let steps = &m.summary(&meta()).coverage_steps;
+    assert_eq!(
+        steps["0.5"],
+        Some(20),
+        "the first checked step at or above 50%"
+    );
+    assert_eq!(steps["0.9"], Some(23), "the last grid counts too");
+    assert_eq!(steps["0.95"], Some(23));
+}
+
+#[test]
 fn a_start_cell_inside_the_clearance_seeds_from_the_nearest_free_cell() {
     // Start in the corner cell, which a 0.3 m robot cannot occupy at 0.25 m cells.
     let mut map = world(4.0, 2.0, 0.25, 0.3, &[]);
