@@ -407,3 +407,34 @@ fn a_killed_world_ends_the_run_as_failed_because_its_policy_never_restarts_it() 
     let leftovers = left_behind(&before);
     assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
 }
+
+#[test]
+fn a_stalled_lockstep_run_ends_with_a_report_instead_of_waiting_forever() {
+    let _serial = serial();
+    // Mapping is never restarted here, so when it freezes nothing can move the run on.
+    let launch = std::fs::read_to_string(workspace().join("launch/stacks/lockstep.toml"))
+        .expect("lockstep.toml")
+        .replace(
+            "role = \"mapping\"\ncommand = \"mole-mapping\"\nrestart = { policy = \"on-failure\", backoff_ms = 200, max = 5 }",
+            "role = \"mapping\"\ncommand = \"mole-mapping\"\nrestart = { policy = \"never\" }",
+        );
+    assert!(launch.contains("policy = \"never\" }\n\n[[process]]\nrole = \"planning\""));
+    let file = std::env::temp_dir().join(format!("mole-stall-{}.toml", std::process::id()));
+    std::fs::write(&file, launch).expect("write the launch file");
+    let stack = Stack::start(
+        "stall",
+        &[file.to_str().expect("utf-8 path"), "--ticks", "100000000"],
+    );
+    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(500));
+    let frozen = pid_of(&stack.namespace, "mole-mapping").expect("mapping runs");
+    signal(frozen, nix::sys::signal::Signal::SIGSTOP);
+    let output = stack.wait(Duration::from_secs(60));
+    let _ = std::fs::remove_file(&file);
+    let launcher_log = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(1), "{launcher_log}");
+    assert!(
+        launcher_log.contains("stalled") && launcher_log.contains("mapping"),
+        "the launcher names the stall and the processes' steps:\n{launcher_log}"
+    );
+}

@@ -28,6 +28,10 @@ const READY_TIMEOUT: Duration = Duration::from_secs(20);
 const FINISH_TIMEOUT: Duration = Duration::from_secs(30);
 /// A ready process that publishes no statistics for this long is hung: alive but not serving.
 const HANG_TIMEOUT: Duration = Duration::from_secs(5);
+/// Lockstep: no new step for this long, every process alive, is a stall the run cannot leave by
+/// itself (the world resends a step every second, a hung process is restarted after
+/// `HANG_TIMEOUT`); the run ends instead of waiting forever.
+const STALL_TIMEOUT: Duration = Duration::from_secs(15);
 /// The launcher's wake-up period (supervision and progress).
 const POLL: Duration = Duration::from_millis(50);
 
@@ -293,6 +297,8 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     let mut exit_reason = None;
     let mut world_done_at: Option<Instant> = None;
     let mut failure = None;
+    // The newest step the monitor reported, and when it came.
+    let mut last_step: (u64, Instant) = (0, Instant::now());
     while exit_reason.is_none() {
         std::thread::sleep(POLL);
         stats_sub.drain(|s| record_stats(s, &mut last_heard, &mut ready, &mut collector));
@@ -385,6 +391,28 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
             if status.finished == 1 {
                 exit_reason = Some(None);
             }
+            if status.header.tick != last_step.0 {
+                last_step = (status.header.tick, Instant::now());
+            }
+        }
+        if mode == ClockMode::Lockstep
+            && world_done_at.is_none()
+            && exit_reason.is_none()
+            && last_step.1.elapsed() > STALL_TIMEOUT
+        {
+            let steps: Vec<String> = collector
+                .processes()
+                .iter()
+                .map(|p| format!("{} {}", p.role, p.steps))
+                .collect();
+            failure = Some(Failure::run(format!(
+                "the lockstep run stalled: no step for {STALL_TIMEOUT:?} after step {}; steps \
+                 handled per process: {} (see the logs in {})",
+                last_step.0,
+                steps.join(", "),
+                args.out.join("logs").display()
+            )));
+            exit_reason = Some(Some("stalled"));
         }
         for event in supervisor.poll() {
             match event {
