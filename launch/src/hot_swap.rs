@@ -154,6 +154,10 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
         truth_watch.poll(&mut seen.truth_stamps, &mut seen.truth_ticks);
     };
 
+    // Tells a stateful replacement (localization) to start from its predecessor's state.
+    let mut spec = spec;
+    spec.env
+        .push(("MOLE_TAKEOVER".to_owned(), "true".to_owned()));
     let pid = env
         .supervisor
         .start_replacement(spec)

@@ -5,11 +5,17 @@
 use clap::Parser;
 use mole_localization::{Estimator, EstimatorKind};
 use mole_runtime::{CommonArgs, Context, StepGate, Wake, now_ns};
-use mole_types::topics;
+use mole_types::{Pose, WorldMap, topics};
 use std::process::ExitCode;
+use std::time::{Duration, Instant};
 
 /// Publish the particle set every this many steps.
 const PARTICLES_EVERY: u64 = 10;
+/// A replacement (`mole swap` sets `MOLE_TAKEOVER`) waits this long for the estimate of the
+/// process it replaces, then starts at the scenario's start pose.
+const TAKEOVER_GRACE: Duration = Duration::from_secs(1);
+/// An estimate this many steps old is still worth taking over (realtime may drop a pose).
+const TAKEOVER_MAX_AGE: u64 = 5;
 
 #[derive(Debug, Parser)]
 #[command(name = "mole-localization", about = "mole's pose estimators (seed §6)")]
@@ -19,6 +25,9 @@ struct Args {
     /// Estimator: bayes, kf, ekf or pf.
     #[arg(long, env = "MOLE_ESTIMATOR", default_value = "ekf")]
     estimator: String,
+    /// Replace a running estimator: start from its latest pose (set by `mole swap`).
+    #[arg(long, env = "MOLE_TAKEOVER", default_value_t = false)]
+    takeover: bool,
 }
 
 fn main() -> ExitCode {
@@ -42,6 +51,13 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
     let mut fix_sub = ctx.passive_subscriber(topics::SENSING_FIX)?;
     let mut pose_pub = ctx.publisher(topics::LOCALIZATION_POSE)?;
     let mut particles_pub = ctx.publisher(topics::LOCALIZATION_PARTICLES)?;
+    // Our own output topic: there, a replacement reads the estimate it takes over. Dropped
+    // once the estimator runs, so our own poses never fill its queue.
+    let mut predecessor = if args.takeover {
+        Some(ctx.passive_subscriber(topics::LOCALIZATION_POSE)?)
+    } else {
+        None
+    };
     let waitset = ctx.waitset()?;
     let wakers = [map_sub.waker(), odom_sub.waker()];
     let _attached = wakers
@@ -53,18 +69,13 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
 
     let mut estimator: Option<Box<dyn Estimator>> = None;
     let mut gate = StepGate::new(ctx.mode());
+    let mut first_step: Option<Instant> = None;
     loop {
         if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
             return Ok(());
         }
-        if estimator.is_none()
-            && map_sub.update()
-            && let Some(map) = map_sub.latest()
-        {
-            estimator = Some(kind.from_map(map)?);
-            tracing::info!(estimator = kind.name(), "map received");
-        }
-        let Some(estimator) = estimator.as_mut() else {
+        map_sub.update();
+        let Some(map) = map_sub.latest() else {
             continue;
         };
         odom_sub.update();
@@ -72,6 +83,47 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
         fix_sub.update();
         let ticks = [odom_sub.tick(), beacons_sub.tick(), fix_sub.tick()];
         let Some(tick) = gate.ready(&ticks) else {
+            continue;
+        };
+        if estimator.is_none() {
+            let waited = first_step.get_or_insert_with(Instant::now).elapsed();
+            let taken_over = predecessor.as_mut().and_then(|sub| {
+                sub.update();
+                sub.latest()
+                    .filter(|p| p.header.tick <= tick && p.header.tick + TAKEOVER_MAX_AGE >= tick)
+                    .copied()
+            });
+            match (taken_over, predecessor.is_some() && waited < TAKEOVER_GRACE) {
+                (Some(pose), _) => {
+                    estimator = Some(kind.from_map(&starting_at(map, &pose))?);
+                    tracing::info!(
+                        estimator = kind.name(),
+                        from_tick = pose.header.tick,
+                        x = pose.x,
+                        y = pose.y,
+                        "took over the running estimate"
+                    );
+                    predecessor = None;
+                    // The predecessor already published this step.
+                    if pose.header.tick == tick {
+                        continue;
+                    }
+                }
+                // Leave the step to the predecessor while its estimate may still come.
+                (None, true) => continue,
+                (None, false) => {
+                    if predecessor.take().is_some() {
+                        tracing::warn!(
+                            "no estimate to take over within {TAKEOVER_GRACE:?}: starting at \
+                             the scenario's start pose"
+                        );
+                    }
+                    estimator = Some(kind.from_map(map)?);
+                    tracing::info!(estimator = kind.name(), "map received");
+                }
+            }
+        }
+        let Some(estimator) = estimator.as_mut() else {
             continue;
         };
         let (Some(odom), Some(beacons), Some(fix)) =
@@ -101,4 +153,14 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
         }
         ctx.count_step();
     }
+}
+
+/// The map with its start pose moved to `pose`: every estimator starts there, with its usual
+/// initial uncertainty.
+fn starting_at(map: &WorldMap, pose: &Pose) -> Box<WorldMap> {
+    let mut moved = Box::new(*map);
+    moved.start_x = pose.x;
+    moved.start_y = pose.y;
+    moved.start_theta = pose.theta;
+    moved
 }
