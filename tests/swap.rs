@@ -53,10 +53,13 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     assert!(text(&out).contains("keeps running"), "{}", text(&out));
 
-    // Two real swaps, one quoted command and one as words.
+    // Real swaps of every swappable role, quoted commands and words. Mapping and
+    // localization take over their predecessor's grids and estimate.
     for args in [
         &["planning", "mole-planning --planner random-walk"][..],
         &["sensing", "mole-sensing"][..],
+        &["mapping", "mole-mapping"][..],
+        &["localization", "mole-localization --estimator pf"][..],
     ] {
         let out = mole_swap(&ns, args);
         assert!(out.status.success(), "{args:?}: {}", text(&out));
@@ -77,10 +80,22 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     let output = stack.wait_and_copy(&keep, Duration::from_secs(60));
     assert!(output.status.success(), "{}", logs(&keep));
     let s = summary(&keep);
+    let log = |role: &str| {
+        std::fs::read_to_string(keep.join(format!("logs/{role}.log"))).unwrap_or_default()
+    };
+    let (mapping_log, localization_log) = (log("mapping"), log("localization"));
     let _ = std::fs::remove_dir_all(&keep);
+    assert!(
+        mapping_log.contains("took over the running grids"),
+        "{mapping_log}"
+    );
+    assert!(
+        localization_log.contains("took over the running estimate"),
+        "{localization_log}"
+    );
     assert_eq!(s["exit_reason"], "stopped", "{s}");
     let swaps = s["swaps"].as_array().expect("swaps in summary.json");
-    assert_eq!(swaps.len(), 2, "{s}");
+    assert_eq!(swaps.len(), 4, "{s}");
     for swap in swaps {
         assert_eq!(swap["steps_lost"], 0, "{swap}");
         assert_eq!(swap["steps_repeated"], 0, "{swap}");

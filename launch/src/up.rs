@@ -351,6 +351,8 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
                         Err(_) => tracing::warn!("swap not done: {line}"),
                     });
                     call.respond(|r| write_swap_response(r, &result, &line));
+                    // The loop did not watch the steps during the swap.
+                    last_step.1 = Instant::now();
                 }
             }
         }

@@ -7,15 +7,13 @@ use mole_localization::{Estimator, EstimatorKind};
 use mole_runtime::{CommonArgs, Context, StepGate, Wake, now_ns};
 use mole_types::{Pose, WorldMap, topics};
 use std::process::ExitCode;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Publish the particle set every this many steps.
 const PARTICLES_EVERY: u64 = 10;
 /// A replacement (`mole swap` sets `MOLE_TAKEOVER`) waits this long for the estimate of the
 /// process it replaces, then starts at the scenario's start pose.
 const TAKEOVER_GRACE: Duration = Duration::from_secs(1);
-/// An estimate this many steps old is still worth taking over (realtime may drop a pose).
-const TAKEOVER_MAX_AGE: u64 = 5;
 
 #[derive(Debug, Parser)]
 #[command(name = "mole-localization", about = "mole's pose estimators (seed §6)")]
@@ -44,6 +42,17 @@ fn main() -> ExitCode {
 
 fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("localization", &args.common)?;
+    // A replacement goes on from the estimate of the process it replaces. First, before any
+    // input port exists: a lockstep publisher waits for a full queue, so an input we did not
+    // read while waiting here would stop the stack.
+    let mut predecessor: Option<Pose> = None;
+    let resume_after = if args.takeover {
+        ctx.take_over(topics::LOCALIZATION_POSE, TAKEOVER_GRACE, |pose| {
+            predecessor = Some(*pose);
+        })?
+    } else {
+        None
+    };
     let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
     let mut odom_sub = ctx.subscriber(topics::SENSING_ODOM)?;
     // Sensing publishes odom last: the fix and the beacons of a step are in when odom wakes us.
@@ -51,13 +60,6 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
     let mut fix_sub = ctx.passive_subscriber(topics::SENSING_FIX)?;
     let mut pose_pub = ctx.publisher(topics::LOCALIZATION_POSE)?;
     let mut particles_pub = ctx.publisher(topics::LOCALIZATION_PARTICLES)?;
-    // Our own output topic: there, a replacement reads the estimate it takes over. Dropped
-    // once the estimator runs, so our own poses never fill its queue.
-    let mut predecessor = if args.takeover {
-        Some(ctx.passive_subscriber(topics::LOCALIZATION_POSE)?)
-    } else {
-        None
-    };
     let waitset = ctx.waitset()?;
     let wakers = [map_sub.waker(), odom_sub.waker()];
     let _attached = wakers
@@ -69,13 +71,39 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
 
     let mut estimator: Option<Box<dyn Estimator>> = None;
     let mut gate = StepGate::new(ctx.mode());
-    let mut first_step: Option<Instant> = None;
+    if let Some(tick) = resume_after {
+        gate.resume_after(tick);
+    }
     loop {
         if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
             return Ok(());
         }
-        map_sub.update();
-        let Some(map) = map_sub.latest() else {
+        if estimator.is_none()
+            && map_sub.update()
+            && let Some(map) = map_sub.latest()
+        {
+            estimator = Some(match &predecessor {
+                Some(pose) => {
+                    tracing::info!(
+                        from_tick = pose.header.tick,
+                        x = pose.x,
+                        y = pose.y,
+                        "took over the running estimate"
+                    );
+                    kind.from_map(&starting_at(map, pose))?
+                }
+                None if args.takeover => {
+                    tracing::warn!(
+                        "no estimate to take over within {TAKEOVER_GRACE:?}: starting at the \
+                         scenario's start pose"
+                    );
+                    kind.from_map(map)?
+                }
+                None => kind.from_map(map)?,
+            });
+            tracing::info!(estimator = kind.name(), "map received");
+        }
+        let Some(estimator) = estimator.as_mut() else {
             continue;
         };
         odom_sub.update();
@@ -83,47 +111,6 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
         fix_sub.update();
         let ticks = [odom_sub.tick(), beacons_sub.tick(), fix_sub.tick()];
         let Some(tick) = gate.ready(&ticks) else {
-            continue;
-        };
-        if estimator.is_none() {
-            let waited = first_step.get_or_insert_with(Instant::now).elapsed();
-            let taken_over = predecessor.as_mut().and_then(|sub| {
-                sub.update();
-                sub.latest()
-                    .filter(|p| p.header.tick <= tick && p.header.tick + TAKEOVER_MAX_AGE >= tick)
-                    .copied()
-            });
-            match (taken_over, predecessor.is_some() && waited < TAKEOVER_GRACE) {
-                (Some(pose), _) => {
-                    estimator = Some(kind.from_map(&starting_at(map, &pose))?);
-                    tracing::info!(
-                        estimator = kind.name(),
-                        from_tick = pose.header.tick,
-                        x = pose.x,
-                        y = pose.y,
-                        "took over the running estimate"
-                    );
-                    predecessor = None;
-                    // The predecessor already published this step.
-                    if pose.header.tick == tick {
-                        continue;
-                    }
-                }
-                // Leave the step to the predecessor while its estimate may still come.
-                (None, true) => continue,
-                (None, false) => {
-                    if predecessor.take().is_some() {
-                        tracing::warn!(
-                            "no estimate to take over within {TAKEOVER_GRACE:?}: starting at \
-                             the scenario's start pose"
-                        );
-                    }
-                    estimator = Some(kind.from_map(map)?);
-                    tracing::info!(estimator = kind.name(), "map received");
-                }
-            }
-        }
-        let Some(estimator) = estimator.as_mut() else {
             continue;
         };
         let (Some(odom), Some(beacons), Some(fix)) =

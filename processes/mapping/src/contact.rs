@@ -173,6 +173,20 @@ impl ContactGrid {
         self.contacts()
     }
 
+    /// Takes over a contact grid published by the mapping process being replaced (a hot
+    /// swap); returns false, changing nothing, for a grid of another kind or geometry.
+    pub fn restore(&mut self, grid: &Grid) -> bool {
+        if grid.kind != GRID_CONTACT || !self.geometry.matches(grid) {
+            return false;
+        }
+        let n = self.geometry.len();
+        for (cell, &class) in self.cells.iter_mut().zip(&grid.cells[..n]) {
+            *cell = u8::from(class == 1);
+        }
+        self.n_points = 0;
+        true
+    }
+
     /// Writes width, height, resolution, origin, kind = GRID_CONTACT and `cells[..w·h]` into a
     /// (loaned) message; the header and the unused tail of `cells` are left alone.
     pub fn write(&self, out: &mut Grid) {
@@ -202,6 +216,19 @@ mod tests {
     fn push(t: &mut Tactile, i: usize, direction: f64, magnitude: f64) {
         t.sensors[i].fx = (magnitude * direction.cos()) as f32;
         t.sensors[i].fy = (magnitude * direction.sin()) as f32;
+    }
+
+    #[test]
+    fn a_restored_contact_grid_has_the_published_cells() {
+        let mut source = ContactGrid::new(2.0, 1.0, 0.1).unwrap();
+        assert!(source.mark_occupied(0.35, 0.75));
+        let mut msg: Box<Grid> = bytemuck::zeroed_box();
+        source.write(&mut msg);
+        let mut replacement = ContactGrid::new(2.0, 1.0, 0.1).unwrap();
+        assert!(replacement.restore(&msg));
+        assert_eq!(replacement.cells(), source.cells());
+        msg.kind = mole_types::GRID_FRONTIER;
+        assert!(!ContactGrid::new(2.0, 1.0, 0.1).unwrap().restore(&msg));
     }
 
     #[test]

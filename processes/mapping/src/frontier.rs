@@ -309,6 +309,34 @@ impl FrontierGrid {
         self.cells[idx] = p.classify(l);
     }
 
+    /// Takes over a frontier grid published by the mapping process being replaced (a hot
+    /// swap); returns false, changing nothing, for a grid of another kind or geometry. The
+    /// message carries classes, not log-odds: a free cell restarts halfway between the
+    /// threshold and the lower clamp, an occupied one halfway to the upper clamp, so the map
+    /// neither flips on the first contrary reading nor holds out like a saturated cell.
+    pub fn restore(&mut self, grid: &Grid) -> bool {
+        if grid.kind != GRID_FRONTIER || !self.geometry.matches(grid) {
+            return false;
+        }
+        let p = self.params;
+        let free = 0.5 * (p.min - p.threshold);
+        let occupied = 0.5 * (p.max + p.threshold);
+        for ((l, cell), &class) in self
+            .log_odds
+            .iter_mut()
+            .zip(self.cells.iter_mut())
+            .zip(&grid.cells[..self.geometry.len()])
+        {
+            *l = match class {
+                CELL_FREE => free,
+                CELL_OCCUPIED => occupied,
+                _ => 0.0,
+            };
+            *cell = p.classify(*l);
+        }
+        true
+    }
+
     /// Writes width, height, resolution, origin, kind = GRID_FRONTIER and `cells[..w·h]` into a
     /// (loaned) message; the header and the unused tail of `cells` are left alone.
     pub fn write(&self, out: &mut Grid) {
@@ -341,6 +369,26 @@ mod tests {
 
     fn count(g: &FrontierGrid, v: u8) -> usize {
         g.cells().iter().filter(|c| **c == v).count()
+    }
+
+    #[test]
+    fn a_restored_grid_has_the_published_classes_and_refuses_other_geometries() {
+        let mut source = FrontierGrid::new(2.0, 1.0, 0.1).unwrap();
+        source.mark_occupied(0.55, 0.55);
+        source.integrate_footprint(Pose2::new(1.5, 0.5, 0.0), 0.2);
+        let mut msg: Box<Grid> = bytemuck::zeroed_box();
+        source.write(&mut msg);
+        let mut replacement = FrontierGrid::new(2.0, 1.0, 0.1).unwrap();
+        assert!(replacement.restore(&msg));
+        assert_eq!(replacement.cells(), source.cells());
+        let p = LogOddsParams::default();
+        let idx = replacement.geometry().world_to_index(0.55, 0.55).unwrap();
+        assert!(replacement.log_odds()[idx] > p.threshold && replacement.log_odds()[idx] < p.max);
+        let mut other = FrontierGrid::new(2.0, 1.0, 0.05).unwrap();
+        assert!(!other.restore(&msg), "another resolution");
+        assert!(other.cells().iter().all(|&c| c == CELL_UNEXPLORED));
+        msg.kind = mole_types::GRID_CONTACT;
+        assert!(!replacement.restore(&msg), "a contact grid");
     }
 
     #[test]

@@ -20,6 +20,16 @@ pub struct GridGeometry {
 }
 
 impl GridGeometry {
+    /// Whether `grid` has exactly this geometry (size, resolution, origin): a grid written by
+    /// another mapping process of the same arena.
+    pub fn matches(&self, grid: &mole_types::Grid) -> bool {
+        grid.width == self.width
+            && grid.height == self.height
+            && grid.resolution == self.resolution
+            && grid.origin_x == self.origin_x
+            && grid.origin_y == self.origin_y
+    }
+
     /// Writes this geometry, `kind` and `cells` (`width × height`, row-major) into a (loaned)
     /// message; the header and the unused tail of `cells` are left alone.
     pub fn write_grid(&self, kind: u32, cells: &[u8], out: &mut mole_types::Grid) {

@@ -7,8 +7,13 @@
 use clap::Parser;
 use mole_mapping::{ContactGrid, FrontierGrid};
 use mole_runtime::{ClockMode, CommonArgs, Context, StepGate, Wake};
-use mole_types::{Pose2, topics};
+use mole_types::{Grid, Pose2, topics};
 use std::process::ExitCode;
+use std::time::Duration;
+
+/// A replacement (`mole swap` sets `MOLE_TAKEOVER`) waits this long for each grid of the
+/// process it replaces, then starts with empty grids.
+const TAKEOVER_GRACE: Duration = Duration::from_secs(1);
 
 #[derive(Debug, Parser)]
 #[command(
@@ -21,6 +26,9 @@ struct Args {
     /// A tactile sensor reading above this force (N) is a touch.
     #[arg(long, env = "MOLE_TOUCH_THRESHOLD", default_value_t = 0.5)]
     touch_threshold: f64,
+    /// Replace a running mapping process: start from its grids (set by `mole swap`).
+    #[arg(long, env = "MOLE_TAKEOVER", default_value_t = false)]
+    takeover: bool,
 }
 
 struct Maps {
@@ -36,6 +44,21 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new("mapping", &args.common)?;
+    // A replacement goes on with the grids of the process it replaces: the contact grid, then
+    // the frontier grid (published after it), whose step it resumes after. First, before any
+    // input port exists: a lockstep publisher waits for a full queue, so an input we did not
+    // read while waiting here would stop the stack.
+    let (mut contact_taken, mut frontier_taken) = (None, None);
+    let resume_after = if args.takeover {
+        ctx.take_over(topics::MAPPING_CONTACT, TAKEOVER_GRACE, |g| {
+            contact_taken = Some(copy_grid(g));
+        })?;
+        ctx.take_over(topics::MAPPING_GRID, TAKEOVER_GRACE, |g| {
+            frontier_taken = Some(copy_grid(g));
+        })?
+    } else {
+        None
+    };
     let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
     let mut pose_sub = ctx.subscriber(topics::LOCALIZATION_POSE)?;
     // A step's pose comes after its scan and tactile readings (localization waits for sensing's
@@ -54,7 +77,11 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
 
     let mut maps: Option<Maps> = None;
     let mut gate = StepGate::new(ctx.mode());
+    if let Some(tick) = resume_after {
+        gate.resume_after(tick);
+    }
     let lockstep = ctx.mode() == ClockMode::Lockstep;
+    let mut skipped = 0u64;
     loop {
         if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
             return Ok(());
@@ -64,9 +91,25 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             && let Some(map) = map_sub.latest()
         {
             let (w, h, res) = (map.arena_width, map.arena_height, map.grid_resolution);
+            let mut frontier = FrontierGrid::new(w, h, res)?;
+            let mut contact = ContactGrid::new(w, h, res)?;
+            if args.takeover {
+                let restored = [
+                    frontier_taken.take().is_some_and(|g| frontier.restore(&g)),
+                    contact_taken.take().is_some_and(|g| contact.restore(&g)),
+                ];
+                if restored == [true, true] {
+                    tracing::info!(after_tick = resume_after, "took over the running grids");
+                } else {
+                    tracing::warn!(
+                        "no grids of this arena to take over within {TAKEOVER_GRACE:?} \
+                         (frontier, contact: {restored:?}): starting with empty grids"
+                    );
+                }
+            }
             maps = Some(Maps {
-                frontier: FrontierGrid::new(w, h, res)?,
-                contact: ContactGrid::new(w, h, res)?,
+                frontier,
+                contact,
                 robot_radius: map.robot.radius,
             });
             tracing::info!(width_m = w, height_m = h, resolution = res, "map received");
@@ -88,8 +131,29 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             }
             let ticks = [pose_sub.tick(), scan_sub.tick(), tactile_sub.tick()];
             let Some(tick) = gate.ready(&ticks) else {
+                // Joined mid-run (a swap or a restart): a step whose readings were sent before
+                // we listened never completes; once a later reading is in, go on without it.
+                if lockstep
+                    && let Some(k) = pose_sub.tick()
+                    && gate.last().is_none_or(|last| last < k)
+                    && [scan_sub.newest_seen(), tactile_sub.newest_seen()]
+                        .iter()
+                        .any(|t| t.is_some_and(|t| t > k))
+                {
+                    skipped += 1;
+                    gate.resume_after(k);
+                    continue;
+                }
                 break;
             };
+            if skipped > 0 {
+                tracing::info!(
+                    skipped,
+                    tick,
+                    "joined the run: skipped the steps whose readings came before us"
+                );
+                skipped = 0;
+            }
             let (Some(pose), Some(scan), Some(tactile)) =
                 (pose_sub.latest(), scan_sub.latest(), tactile_sub.latest())
             else {
@@ -116,4 +180,11 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             ctx.count_step();
         }
     }
+}
+
+/// A copy of a grid message on the heap (once, at a hand-over: never on a hot path).
+fn copy_grid(grid: &Grid) -> Box<Grid> {
+    let mut copy: Box<Grid> = bytemuck::zeroed_box();
+    bytemuck::bytes_of_mut(&mut *copy).copy_from_slice(bytemuck::bytes_of(grid));
+    copy
 }

@@ -81,6 +81,12 @@ impl StepGate {
         Some(k)
     }
 
+    /// Treats every tick up to `tick` as handled: a replacement resumes after the last step
+    /// of the process it took over from.
+    pub fn resume_after(&mut self, tick: u64) {
+        self.last = Some(tick);
+    }
+
     /// The last tick handled.
     pub fn last(&self) -> Option<u64> {
         self.last

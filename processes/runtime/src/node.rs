@@ -464,10 +464,38 @@ impl Context {
             listener,
             stats,
             latest: None,
-            pending: None,
+            pending: [None, None],
             last_seq: None,
             last_warning: None,
         })
+    }
+
+    /// A replacement's hand-over (`mole swap` sets `MOLE_TAKEOVER`): waits up to `grace` for
+    /// the process being replaced to publish `topic` (the replacement's own output) and lends
+    /// the newest valid sample to `take`; returns its tick, or `None` when none came, and the
+    /// replacement starts afresh. The subscriber is gone on return, so the replacement's own
+    /// output never fills its queue (a lockstep publisher waits while a queue is full).
+    pub fn take_over<M: Message>(
+        &mut self,
+        topic: Topic<M>,
+        grace: Duration,
+        take: impl FnOnce(&M),
+    ) -> Result<Option<u64>, RuntimeError> {
+        let mut predecessor = self.subscriber(topic)?;
+        let waitset = self.waitset()?;
+        let waker = predecessor.waker();
+        let _attached = waitset.attach(&waker)?;
+        let deadline = Instant::now() + grace;
+        while !predecessor.update() {
+            if waitset.wait(self, Some(deadline))? != Wake::Data {
+                predecessor.update();
+                break;
+            }
+        }
+        Ok(predecessor.latest().map(|m| {
+            take(m);
+            m.header().tick
+        }))
     }
 
     /// A WaitSet for this process's wake-ups (signal handling disabled).

@@ -92,8 +92,9 @@ pub struct Subscriber<M: Message> {
     pub(crate) listener: Option<Rc<Listener<ipc::Service>>>,
     pub(crate) stats: PortHandle,
     pub(crate) latest: Option<Sample<ipc::Service, M, ()>>,
-    /// A sample newer than [`Subscriber::update_through`] asked for, held for a later call.
-    pub(crate) pending: Option<Sample<ipc::Service, M, ()>>,
+    /// Samples newer than [`Subscriber::update_through`] asked for, held for a later call:
+    /// one per publisher (two while a hot swap runs both side by side).
+    pub(crate) pending: [Option<Sample<ipc::Service, M, ()>>; 2],
     pub(crate) last_seq: Option<u64>,
     pub(crate) last_warning: Option<Instant>,
 }
@@ -106,7 +107,7 @@ impl<M: Message> Subscriber<M> {
     /// poller pays only for reading shared memory.
     pub fn drain(&mut self, mut on_message: impl FnMut(&M)) -> usize {
         let mut valid = 0;
-        while let Some(sample) = self.pending.take().or_else(|| self.next_valid()) {
+        while let Some(sample) = self.take_pending().or_else(|| self.next_valid()) {
             on_message(sample.payload());
             self.latest = Some(sample);
             valid += 1;
@@ -127,27 +128,47 @@ impl<M: Message> Subscriber<M> {
     /// [`Subscriber::update`] up to step `tick`: keeps the newest valid message whose tick is
     /// at most `tick`. A newer one stays held, unread, for a later call, so a consumer that
     /// must use step k−1 (lockstep planning) is not handed step k because it came early.
-    /// At most two samples are held at a time: the latest and the pending one.
+    ///
+    /// iceoryx2 hands out one publisher's queue before the next one's, so while a hot swap
+    /// runs two publishers, step k of one may come before step k−1 of the other: one early
+    /// sample is held per publisher (in lockstep no publisher is more than a step ahead), and
+    /// receiving goes on past it.
     pub fn update_through(&mut self, tick: u64) -> bool {
         let mut fresh = false;
-        loop {
-            let Some(sample) = self.pending.take().or_else(|| self.next_valid()) else {
+        for slot in 0..self.pending.len() {
+            if self.pending[slot]
+                .as_ref()
+                .is_some_and(|s| s.payload().header().tick <= tick)
+                && let Some(sample) = self.pending[slot].take()
+            {
+                fresh |= self.keep_if_newest(sample);
+            }
+        }
+        while let Some(free) = self.pending.iter().position(Option::is_none) {
+            let Some(sample) = self.next_valid() else {
                 break;
             };
-            let sample_tick = sample.payload().header().tick;
-            if sample_tick > tick {
-                self.pending = Some(sample);
-                break;
+            if sample.payload().header().tick > tick {
+                self.pending[free] = Some(sample);
+            } else {
+                fresh |= self.keep_if_newest(sample);
             }
-            if self.tick().is_some_and(|newest| sample_tick < newest) {
-                continue;
-            }
-            // Release the older sample before keeping the newer one.
-            self.latest = None;
-            self.latest = Some(sample);
-            fresh = true;
         }
         fresh
+    }
+
+    /// Keeps `sample` as the latest unless an older step; returns whether it was kept.
+    fn keep_if_newest(&mut self, sample: Sample<ipc::Service, M, ()>) -> bool {
+        if self
+            .tick()
+            .is_some_and(|newest| sample.payload().header().tick < newest)
+        {
+            return false;
+        }
+        // Release the older sample before keeping the newer one.
+        self.latest = None;
+        self.latest = Some(sample);
+        true
     }
 
     /// Lockstep, for a consumer that may run behind the loop: moves on to the oldest message
@@ -159,7 +180,7 @@ impl<M: Message> Subscriber<M> {
         if self.tick().is_some_and(newer) {
             return true;
         }
-        while let Some(sample) = self.pending.take().or_else(|| self.next_valid()) {
+        while let Some(sample) = self.take_pending().or_else(|| self.next_valid()) {
             if newer(sample.payload().header().tick) {
                 self.latest = None;
                 self.latest = Some(sample);
@@ -167,6 +188,17 @@ impl<M: Message> Subscriber<M> {
             }
         }
         false
+    }
+
+    /// The highest step seen so far: the latest message's or a held-back one's. A lockstep
+    /// consumer that joined mid-run learns from it that an older step's message will not come.
+    pub fn newest_seen(&self) -> Option<u64> {
+        self.pending
+            .iter()
+            .flatten()
+            .map(|s| s.payload().header().tick)
+            .chain(self.tick())
+            .max()
     }
 
     /// The newest valid message received so far.
@@ -193,6 +225,18 @@ impl<M: Message> Subscriber<M> {
             listener: self.listener.clone(),
             probe: self.subscriber.clone(),
         }
+    }
+
+    /// The held-back sample of the lowest step, if any.
+    fn take_pending(&mut self) -> Option<Sample<ipc::Service, M, ()>> {
+        let slot = (0..self.pending.len())
+            .filter(|&i| self.pending[i].is_some())
+            .min_by_key(|&i| {
+                self.pending[i]
+                    .as_ref()
+                    .map_or(u64::MAX, |s| s.payload().header().tick)
+            })?;
+        self.pending[slot].take()
     }
 
     fn next_valid(&mut self) -> Option<Sample<ipc::Service, M, ()>> {

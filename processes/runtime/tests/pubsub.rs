@@ -134,6 +134,30 @@ fn update_through_holds_back_a_step_that_came_early() {
 }
 
 #[test]
+fn update_through_finds_the_step_asked_for_behind_another_publishers_early_one() {
+    // A hot swap: the old and the new process publish side by side, and iceoryx2 hands out
+    // one publisher's queue before the other's.
+    let args = args("two-publishers", ClockMode::Lockstep);
+    let (old, new) = (context("old", &args), context("new", &args));
+    let consumer = context("consumer", &args);
+    let mut sub = consumer.subscriber(topics::PLANNING_CMD).unwrap();
+    let mut old_pub = old.publisher(topics::PLANNING_CMD).unwrap();
+    let mut new_pub = new.publisher(topics::PLANNING_CMD).unwrap();
+    for p in [&old_pub, &new_pub] {
+        p.update_connections();
+    }
+    publish_cmds(&mut old_pub, &[5]);
+    publish_cmds(&mut new_pub, &[4]);
+    publish_cmds(&mut old_pub, &[]);
+    assert!(sub.update_through(4));
+    assert_eq!(sub.tick(), Some(4), "step 4, whichever queue came first");
+    publish_cmds(&mut new_pub, &[5]);
+    assert!(sub.update_through(5));
+    assert_eq!(sub.tick(), Some(5));
+    assert!(!sub.update_through(5), "the second 5 is not news");
+}
+
+#[test]
 fn update_next_takes_every_step_in_order_and_drops_resends() {
     let args = args("next", ClockMode::Lockstep);
     let producer = context("producer", &args);
