@@ -4,7 +4,7 @@
 //! the stack's version (`scripts/python-env.sh` installs it; `.ci/run` calls it).
 
 use mole_integration_tests::*;
-use mole_types::{DIRECTION_PUBLISH, read_name, topics};
+use mole_types::{DIRECTION_PUBLISH, DIRECTION_SUBSCRIBE, Stats, read_name, topics};
 use std::collections::BTreeMap;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -162,6 +162,23 @@ impl PlannerStats {
                 *direction == DIRECTION_PUBLISH && *count > 0 && *rate > 50.0
             })
     }
+
+    /// Whether planning/status was published (its count runs over the whole run).
+    fn reporting_status(&self) -> bool {
+        self.topics
+            .get("planning/status")
+            .is_some_and(|(direction, count, _)| *direction == DIRECTION_PUBLISH && *count > 0)
+    }
+}
+
+/// The monitor's planning/status subscriber in its latest stack/stats: (received, invalid),
+/// both counted over the whole run.
+fn status_at_monitor(stats: &Stats) -> Option<(u64, u64)> {
+    stats
+        .topics()
+        .iter()
+        .find(|t| t.direction == DIRECTION_SUBSCRIBE && read_name(&t.topic) == "planning/status")
+        .map(|t| (t.count, t.invalid))
 }
 
 #[test]
@@ -181,14 +198,21 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
     stack.wait_for_log("planning", "ready", Duration::from_secs(60));
     let observer = join_realtime_stack(&stack.namespace, "observer");
     let mut stats_sub = observer.subscriber(topics::STACK_STATS).expect("stats");
-    // Watch until a window of a second shows the planner commanding at the world's rate, and
-    // one more window came.
+    // Watch until a window of a second shows the planner commanding at the world's rate, one
+    // more window came, and the monitor reports planning/status received. No Rust planner runs
+    // (the Python one took its place), so what the monitor received came from the Python one.
     let mut seen = PlannerStats::default();
+    let mut at_monitor: Option<(u64, u64)> = None;
+    let received = |at: Option<(u64, u64)>| at.is_some_and(|(count, _)| count > 0);
     let mut samples = 0;
     let mut cmdline = Vec::new();
     let deadline = Instant::now() + Duration::from_secs(30);
-    while !(seen.commanding() && samples >= 2) && Instant::now() < deadline {
+    while !(seen.commanding() && samples >= 2 && received(at_monitor)) && Instant::now() < deadline
+    {
         stats_sub.drain(|s| {
+            if read_name(&s.process) == "monitor" {
+                at_monitor = status_at_monitor(s);
+            }
             if read_name(&s.process) == "planning" {
                 samples += 1;
                 seen.pid = s.pid;
@@ -217,6 +241,19 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
         "planning/cmd at the world's rate: {seen:?}"
     );
     assert!(samples >= 2, "statistics once a second: {samples} in 30 s");
+    assert!(
+        seen.reporting_status(),
+        "the planner publishes planning/status: {seen:?}"
+    );
+    assert!(
+        received(at_monitor),
+        "the monitor received planning/status: {at_monitor:?}"
+    );
+    assert_eq!(
+        at_monitor.map(|(_, invalid)| invalid),
+        Some(0),
+        "every planning/status passed validate()"
+    );
     assert!(
         String::from_utf8_lossy(&cmdline).contains("planner.py"),
         "the planning statistics come from the Python process (pid {})",

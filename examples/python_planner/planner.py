@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """mole's planning role in Python: a wall-avoiding wanderer.
 
-world/map once, then localization/pose and sensing/scan every step → planning/cmd, through
-iceoryx2's Python package and the ctypes layouts of mole_messages.py (generated from the Rust
-types). Run it in the place of the Rust planner, from the repository's root:
+world/map once, then localization/pose and sensing/scan every step → planning/cmd and
+planning/status, through iceoryx2's Python package and the ctypes layouts of mole_messages.py
+(generated from the Rust types). Run it in the place of the Rust planner, from the repository's
+root:
 
     mole up --swap planning="python3 examples/python_planner/planner.py"
 """
@@ -74,6 +75,7 @@ def run():
     scan_sub = node.subscriber(msg.SENSING_SCAN, valid_scan)
     grid_sub = node.subscriber(msg.MAPPING_GRID, lambda g: g.width * g.height <= len(g.cells))
     cmd_pub = node.publisher(msg.PLANNING_CMD)
+    status_pub = node.publisher(msg.PLANNING_STATUS)
     node.ready()
 
     wanderer, last_tick = None, None
@@ -98,11 +100,19 @@ def run():
         last_tick = tick
         v, omega, mode = wanderer.step(scan_sub.latest())
 
-        def fill(cmd):
+        def fill_cmd(cmd):
             cmd.v, cmd.omega, cmd.mode = v, omega, mode
 
-        # origin_ns travels on: the world measures the loop latency from it.
-        cmd_pub.publish(tick, pose_sub.latest().header.origin_ns, fill)
+        def fill_status(status):
+            # The mode just commanded. No goal, no frontier, no path: the sample comes zeroed,
+            # so flags, goal, frontier, bounces and n_path are already 0.
+            status.mode = mode
+
+        # origin_ns travels on: the world measures the loop latency from it. The status
+        # follows the command, as with the Rust planner.
+        origin_ns = pose_sub.latest().header.origin_ns
+        cmd_pub.publish(tick, origin_ns, fill_cmd)
+        status_pub.publish(tick, origin_ns, fill_status)
         node.steps += 1
     node.close()
 
