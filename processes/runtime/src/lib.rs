@@ -24,8 +24,9 @@ pub use alloc_counter::{CountingAllocator, allocations_during};
 pub use clock::{ClockMode, StepGate, parse_point};
 pub use control::{ControlCall, ControlClient, ControlServer};
 pub use node::{
-    Attachment, BadInput, CommonArgs, Context, DEFAULT_SPIN_US, RuntimeError, WaitSet, Wake,
-    cleanup_dead_nodes, exit_code, init_tracing, list_topics, live_nodes_in_namespace, now_ns,
+    Attachment, BadInput, CommonArgs, Context, DEFAULT_SPIN_US, RuntimeError, STUCK_CONSUMER,
+    WaitSet, Wake, cleanup_dead_nodes, exit_code, init_tracing, list_topics,
+    live_nodes_in_namespace, now_ns,
 };
 pub use ports::{Publisher, Subscriber, Waker};
 pub use stats::StatsRegistry;

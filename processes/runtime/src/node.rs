@@ -222,6 +222,11 @@ pub struct Context {
     spin_lead: Duration,
 }
 
+/// Lockstep: how long a publisher waits for a subscriber whose queue is full before it drops
+/// the sample for that subscriber. Far above any real wait (µs to ms), below the launcher's
+/// hang detection, so a frozen consumer stalls the stack only until it is restarted.
+pub const STUCK_CONSUMER: Duration = Duration::from_secs(3);
+
 /// How long before a realtime input is due a process starts looking for it (µs), unless
 /// `MOLE_SPIN_US` says otherwise.
 pub const DEFAULT_SPIN_US: u64 = 0;
@@ -394,7 +399,27 @@ impl Context {
         let lockstep = self.mode == ClockMode::Lockstep;
         let mut builder = pubsub.publisher_builder().max_loaned_samples(2);
         if lockstep {
-            builder = builder.backpressure_strategy(BackpressureStrategy::RetryUntilDelivered);
+            // Lockstep waits for a full queue (that is what makes it deterministic), but not
+            // forever: a consumer that reads nothing for STUCK_CONSUMER (frozen, or gone while
+            // its queue was full) loses this sample instead of stopping the whole stack, and a
+            // shutdown never waits.
+            let shutdown = self.shutdown.clone();
+            let topic_name = topic.name;
+            builder = builder
+                .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+                .set_backpressure_handler(move |info: &iceoryx2::port::BackpressureInfo| {
+                    if shutdown.load(Ordering::Relaxed) {
+                        return iceoryx2::port::BackpressureAction::DiscardData;
+                    }
+                    if info.elapsed_time < STUCK_CONSUMER {
+                        return iceoryx2::port::BackpressureAction::Retry;
+                    }
+                    tracing::warn!(
+                        topic = topic_name,
+                        "a subscriber read nothing for {STUCK_CONSUMER:?}: this sample is dropped for it"
+                    );
+                    iceoryx2::port::BackpressureAction::DiscardData
+                });
         }
         let publisher = builder
             .create()

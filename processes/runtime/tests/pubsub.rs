@@ -241,3 +241,32 @@ fn a_different_layout_on_a_topic_is_refused_naming_both_types() {
         "{text}"
     );
 }
+
+#[test]
+fn a_lockstep_publisher_gives_up_on_a_subscriber_that_reads_nothing() {
+    // In a thread, so that a publisher waiting forever fails the test instead of hanging it.
+    let (done, finished) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let args = args("stuck", ClockMode::Lockstep);
+        let producer = context("producer", &args);
+        let consumer = context("consumer", &args);
+        let mut cmd_pub = producer.publisher(topics::PLANNING_CMD).unwrap();
+        let mut cmd_sub = consumer.subscriber(topics::PLANNING_CMD).unwrap();
+        let buffer = topics::PLANNING_CMD.buffer as u64;
+        let ticks: Vec<u64> = (0..buffer).collect();
+        publish_cmds(&mut cmd_pub, &ticks);
+        // The queue is full and nobody reads it: the next sample waits STUCK_CONSUMER, then
+        // is dropped for this subscriber; after a shutdown request it does not wait at all.
+        publish_cmds(&mut cmd_pub, &[buffer]);
+        producer.request_shutdown();
+        publish_cmds(&mut cmd_pub, &[buffer + 1]);
+        let mut received = Vec::new();
+        cmd_sub.drain(|c| received.push(c.header.tick));
+        let _ = done.send(received);
+    });
+    let received = finished
+        .recv_timeout(mole_runtime::STUCK_CONSUMER * 5)
+        .expect("the publisher gave up on the full queue");
+    let buffer = topics::PLANNING_CMD.buffer as u64;
+    assert_eq!(received, (0..buffer).collect::<Vec<_>>());
+}
