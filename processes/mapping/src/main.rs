@@ -82,8 +82,10 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     }
     let lockstep = ctx.mode() == ClockMode::Lockstep;
     let mut skipped = 0u64;
+    let mut recheck_warned = false;
     loop {
-        if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
+        let wake = waitset.wait(&mut ctx, None)?;
+        if wake == Wake::Shutdown {
             return Ok(());
         }
         if maps.is_none()
@@ -146,6 +148,13 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                 }
                 break;
             };
+            if wake == Wake::Timeout && !recheck_warned {
+                recheck_warned = true;
+                tracing::warn!(
+                    tick,
+                    "lockstep: a step was ready without a wake-up; the idle re-check found it"
+                );
+            }
             if skipped > 0 {
                 tracing::info!(
                     skipped,

@@ -222,6 +222,10 @@ pub struct Context {
     spin_lead: Duration,
 }
 
+/// Lockstep: the longest a process sleeps without looking at its inputs (see
+/// [`WaitSet::wait`]); costs ten idle wake-ups a second.
+pub const LOCKSTEP_RECHECK: Duration = Duration::from_millis(100);
+
 /// Lockstep: how long a publisher waits for a subscriber whose queue is full before it drops
 /// the sample for that subscriber. Far above any real wait (µs to ms), below the launcher's
 /// hang detection, so a frozen consumer stalls the stack only until it is restarted.
@@ -710,6 +714,12 @@ impl WaitSet {
     /// Sleeps until data, `deadline` (if any) or a shutdown; publishes the statistics on the
     /// way when they are due.
     pub fn wait(&self, ctx: &mut Context, deadline: Option<Instant>) -> Result<Wake, RuntimeError> {
+        // Lockstep never sleeps longer than LOCKSTEP_RECHECK without looking at its inputs: a
+        // step whose wake-up went missing costs that long instead of stopping the stack.
+        let deadline = match (deadline, ctx.mode()) {
+            (None, ClockMode::Lockstep) => Some(Instant::now() + LOCKSTEP_RECHECK),
+            (deadline, _) => deadline,
+        };
         loop {
             if ctx.shutdown_requested() {
                 return Ok(Wake::Shutdown);
