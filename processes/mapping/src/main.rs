@@ -9,7 +9,10 @@ use mole_mapping::{ContactGrid, FrontierGrid};
 use mole_runtime::{ClockMode, CommonArgs, Context, StepGate, Wake};
 use mole_types::{Grid, Pose2, topics};
 use std::process::ExitCode;
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+/// Lockstep: a step held this long with its pose but not its readings is reported.
+const INCOMPLETE_WARNING: Duration = Duration::from_secs(2);
 
 /// A replacement (`mole swap` sets `MOLE_TAKEOVER`) waits this long for each grid of the
 /// process it replaces, then starts with empty grids.
@@ -83,6 +86,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let lockstep = ctx.mode() == ClockMode::Lockstep;
     let mut skipped = 0u64;
     let mut recheck_warned = false;
+    let (mut incomplete_since, mut incomplete_warned) = (None::<(u64, Instant)>, false);
     loop {
         let wake = waitset.wait(&mut ctx, None)?;
         if wake == Wake::Shutdown {
@@ -146,8 +150,26 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                     gate.resume_after(k);
                     continue;
                 }
+                // A pose held this long without its readings is a step that cannot complete:
+                // say what is missing, once.
+                if lockstep && let Some(k) = pose_sub.tick().filter(|&k| gate.last() < Some(k)) {
+                    let since = *incomplete_since.get_or_insert((k, Instant::now()));
+                    if since.0 == k && since.1.elapsed() > INCOMPLETE_WARNING && !incomplete_warned
+                    {
+                        incomplete_warned = true;
+                        tracing::warn!(
+                            pose = k,
+                            scan = ?scan_sub.newest_seen(),
+                            tactile = ?tactile_sub.newest_seen(),
+                            "lockstep: step {k} has its pose but not all its readings"
+                        );
+                    } else if since.0 != k {
+                        incomplete_since = Some((k, Instant::now()));
+                    }
+                }
                 break;
             };
+            incomplete_since = None;
             if wake == Wake::Timeout && !recheck_warned {
                 recheck_warned = true;
                 tracing::warn!(
