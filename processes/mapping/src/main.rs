@@ -85,11 +85,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     }
     let lockstep = ctx.mode() == ClockMode::Lockstep;
     let mut skipped = 0u64;
-    let mut recheck_warned = false;
     let (mut incomplete_since, mut incomplete_warned) = (None::<(u64, Instant)>, false);
     loop {
-        let wake = waitset.wait(&mut ctx, None)?;
-        if wake == Wake::Shutdown {
+        if waitset.wait(&mut ctx, None)? == Wake::Shutdown {
             return Ok(());
         }
         if maps.is_none()
@@ -170,13 +168,6 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                 break;
             };
             incomplete_since = None;
-            if wake == Wake::Timeout && !recheck_warned {
-                recheck_warned = true;
-                tracing::warn!(
-                    tick,
-                    "lockstep: a step was ready without a wake-up; the idle re-check found it"
-                );
-            }
             if skipped > 0 {
                 tracing::info!(
                     skipped,

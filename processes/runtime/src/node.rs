@@ -536,6 +536,8 @@ impl Context {
         Ok(WaitSet {
             waitset,
             listeners: core::cell::RefCell::new(Vec::new()),
+            probes: core::cell::RefCell::new(Vec::new()),
+            missed_signal: core::cell::Cell::new(false),
             anticipation: core::cell::RefCell::new(None),
         })
     }
@@ -633,6 +635,10 @@ pub struct WaitSet {
     /// Every attached listener: drained on each wake-up, so a topic the process no longer
     /// reads (world/map after the first sample) cannot keep the WaitSet awake.
     listeners: core::cell::RefCell<Vec<Rc<iceoryx2::port::listener::Listener<ipc::Service>>>>,
+    /// The queues of the attached subscribers, looked at when a wait ends without a signal.
+    probes: core::cell::RefCell<Vec<Rc<dyn crate::ports::Probe>>>,
+    /// Whether a sample without its signal was reported already.
+    missed_signal: core::cell::Cell<bool>,
     anticipation: core::cell::RefCell<Option<Anticipation>>,
 }
 
@@ -684,6 +690,7 @@ impl WaitSet {
             .attach_notification(&**listener)
             .map_err(|e| RuntimeError::Wait(format!("attach {}: {e:?}", waker.topic)))?;
         self.listeners.borrow_mut().push(listener.clone());
+        self.probes.borrow_mut().push(waker.probe.clone());
         Ok(Attachment { _guard: guard })
     }
 
@@ -702,7 +709,11 @@ impl WaitSet {
         });
     }
 
-    /// Consumes the wake-up signals of every attached listener.
+    /// Consumes the wake-up signals of every attached listener, on every return: besides
+    /// emptying the sockets, `try_wait` resets iceoryx2's "notified" state. In iceoryx2 0.10 a
+    /// notification that lands while the listener empties its socket leaves that state set
+    /// with no datagram behind; every later notification is then coalesced away and the
+    /// WaitSet sleeps through them. Only a `try_wait` clears it again, so a timeout drains too.
     fn drain_listeners(&self) {
         // Before the caller reads the samples: a sample that arrives after this point leaves
         // its signal pending for the next wait.
@@ -728,6 +739,7 @@ impl WaitSet {
             let now = Instant::now();
             let until_deadline = deadline.map(|d| d.saturating_duration_since(now));
             if until_deadline == Some(Duration::ZERO) {
+                self.drain_listeners();
                 return Ok(Wake::Timeout);
             }
             // iceoryx2's WaitSet waits in whole milliseconds, rounded up (epoll): the last
@@ -736,6 +748,7 @@ impl WaitSet {
                 && left < Duration::from_millis(1)
             {
                 std::thread::sleep(left);
+                self.drain_listeners();
                 return Ok(Wake::Timeout);
             }
             let mut timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));
@@ -793,6 +806,17 @@ impl WaitSet {
                     a.last.set(Some(Instant::now()));
                 }
                 self.drain_listeners();
+                return Ok(Wake::Data);
+            }
+            // No signal: reset a stuck "notified" state (see `drain_listeners`), and if a
+            // sample came without its signal, wake up for it now.
+            self.drain_listeners();
+            if self.probes.borrow().iter().any(|p| p.has_data()) {
+                if !self.missed_signal.replace(true) {
+                    tracing::warn!(
+                        "a sample came without its wake-up signal; found by looking (warned once)"
+                    );
+                }
                 return Ok(Wake::Data);
             }
         }
