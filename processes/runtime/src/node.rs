@@ -714,6 +714,7 @@ impl WaitSet {
     /// notification that lands while the listener empties its socket leaves that state set
     /// with no datagram behind; every later notification is then coalesced away and the
     /// WaitSet sleeps through them. Only a `try_wait` clears it again, so a timeout drains too.
+    /// (Related upstream report: eclipse-iceoryx/iceoryx2#1811.)
     fn drain_listeners(&self) {
         // Before the caller reads the samples: a sample that arrives after this point leaves
         // its signal pending for the next wait.
