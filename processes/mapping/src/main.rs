@@ -151,9 +151,11 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                 // A pose held this long without its readings is a step that cannot complete:
                 // say what is missing, once.
                 if lockstep && let Some(k) = pose_sub.tick().filter(|&k| gate.last() < Some(k)) {
-                    let since = *incomplete_since.get_or_insert((k, Instant::now()));
-                    if since.0 == k && since.1.elapsed() > INCOMPLETE_WARNING && !incomplete_warned
-                    {
+                    let since = match incomplete_since {
+                        Some((held, since)) if held == k => since,
+                        _ => incomplete_since.insert((k, Instant::now())).1,
+                    };
+                    if since.elapsed() > INCOMPLETE_WARNING && !incomplete_warned {
                         incomplete_warned = true;
                         tracing::warn!(
                             pose = k,
@@ -161,8 +163,6 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                             tactile = ?tactile_sub.newest_seen(),
                             "lockstep: step {k} has its pose but not all its readings"
                         );
-                    } else if since.0 != k {
-                        incomplete_since = Some((k, Instant::now()));
                     }
                 }
                 break;

@@ -135,14 +135,10 @@ impl<M: Message> Subscriber<M> {
     /// receiving goes on past it.
     pub fn update_through(&mut self, tick: u64) -> bool {
         let mut fresh = false;
-        for slot in 0..self.pending.len() {
-            if self.pending[slot]
-                .as_ref()
-                .is_some_and(|s| s.payload().header().tick <= tick)
-                && let Some(sample) = self.pending[slot].take()
-            {
-                fresh |= self.keep_if_newest(sample);
-            }
+        while self.lowest_pending().is_some_and(|(held, _)| held <= tick)
+            && let Some(sample) = self.take_pending()
+        {
+            fresh |= self.keep_if_newest(sample);
         }
         while let Some(free) = self.pending.iter().position(Option::is_none) {
             let Some(sample) = self.next_valid() else {
@@ -165,10 +161,14 @@ impl<M: Message> Subscriber<M> {
         {
             return false;
         }
-        // Release the older sample before keeping the newer one.
+        self.hold(sample);
+        true
+    }
+
+    /// Makes `sample` the latest, releasing the older one first (at most two are borrowed).
+    fn hold(&mut self, sample: Sample<ipc::Service, M, ()>) {
         self.latest = None;
         self.latest = Some(sample);
-        true
     }
 
     /// Lockstep, for a consumer that may run behind the loop: moves on to the oldest message
@@ -182,8 +182,7 @@ impl<M: Message> Subscriber<M> {
         }
         while let Some(sample) = self.take_pending().or_else(|| self.next_valid()) {
             if newer(sample.payload().header().tick) {
-                self.latest = None;
-                self.latest = Some(sample);
+                self.hold(sample);
                 return true;
             }
         }
@@ -227,15 +226,18 @@ impl<M: Message> Subscriber<M> {
         }
     }
 
+    /// The lowest step held back, and its slot.
+    fn lowest_pending(&self) -> Option<(u64, usize)> {
+        self.pending
+            .iter()
+            .enumerate()
+            .filter_map(|(slot, s)| s.as_ref().map(|s| (s.payload().header().tick, slot)))
+            .min()
+    }
+
     /// The held-back sample of the lowest step, if any.
     fn take_pending(&mut self) -> Option<Sample<ipc::Service, M, ()>> {
-        let slot = (0..self.pending.len())
-            .filter(|&i| self.pending[i].is_some())
-            .min_by_key(|&i| {
-                self.pending[i]
-                    .as_ref()
-                    .map_or(u64::MAX, |s| s.payload().header().tick)
-            })?;
+        let (_, slot) = self.lowest_pending()?;
         self.pending[slot].take()
     }
 
