@@ -2,46 +2,11 @@
 //! allocations of this thread while each estimator runs predict + correct in steady state.
 
 use mole_localization::{Estimator, EstimatorKind};
+use mole_runtime::{CountingAllocator, allocations_during};
 use mole_types::{BeaconReading, BeaconSite, Beacons, Fix, Odom, WorldMap};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-struct Counting;
-
-thread_local! {
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-// SAFETY: every call is forwarded unchanged to the system allocator; the counter is a
-// const-initialised thread-local Cell, which neither allocates nor re-enters the allocator.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-        // SAFETY: forwarded with the caller's layout.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded with the caller's pointer and layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-        // SAFETY: forwarded with the caller's layout.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-        // SAFETY: forwarded with the caller's pointer, layout and size.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn allocations() -> u64 {
-    ALLOCATIONS.with(Cell::get)
-}
+static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 fn map() -> Box<WorldMap> {
     let mut m: Box<WorldMap> = bytemuck::zeroed_box();
@@ -68,8 +33,14 @@ fn map() -> Box<WorldMap> {
     m
 }
 
+/// Predict + correct allocates nothing for every estimator, garbage readings included.
 #[test]
 fn steady_state_steps_do_not_allocate() {
+    // A broken counter would pass everything below: it must see this Box first.
+    let boxed = allocations_during(|| {
+        std::hint::black_box(Box::new([0u8; 64]));
+    });
+    assert!(boxed >= 1, "a Box was allocated, the counter saw {boxed}");
     let map = map();
     let mut beacons: Box<Beacons> = bytemuck::zeroed_box();
     let mut odom: Odom = bytemuck::Zeroable::zeroed();
@@ -105,11 +76,12 @@ fn steady_state_steps_do_not_allocate() {
         for k in 0..5 {
             step(est.as_mut(), k);
         }
-        let before = allocations();
-        for k in 5..25 {
-            step(est.as_mut(), k);
-        }
-        let per_step = (allocations() - before) as f64 / 20.0;
+        let n = allocations_during(|| {
+            for k in 5..25 {
+                step(est.as_mut(), k);
+            }
+        });
+        let per_step = n as f64 / 20.0;
         assert_eq!(
             per_step,
             0.0,

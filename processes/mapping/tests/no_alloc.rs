@@ -7,8 +7,14 @@ use mole_types::*;
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
+/// Integrating a footprint, a scan and a touch and writing both grids allocates nothing.
 #[test]
 fn a_mapping_step_does_not_allocate() {
+    // A broken counter would pass everything below: it must see this Box first.
+    let boxed = allocations_during(|| {
+        std::hint::black_box(Box::new([0u8; 64]));
+    });
+    assert!(boxed >= 1, "a Box was allocated, the counter saw {boxed}");
     let mut frontier = FrontierGrid::new(10.0, 10.0, 0.05).expect("grid");
     let mut contact = ContactGrid::new(10.0, 10.0, 0.05).expect("grid");
     let mut scan: Box<Scan> = bytemuck::zeroed_box();

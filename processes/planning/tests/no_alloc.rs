@@ -3,38 +3,11 @@
 use mole_planning::{
     LocalPlanner, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
 };
+use mole_runtime::{CountingAllocator, allocations_during};
 use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid, Pose2, Scan};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-
-struct Counting;
-
-static COUNT: AtomicU64 = AtomicU64::new(0);
-static ON: AtomicBool = AtomicBool::new(false);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if ON.load(Ordering::Relaxed) {
-            COUNT.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if ON.load(Ordering::Relaxed) {
-            COUNT.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 fn limits() -> RobotLimits {
     RobotLimits {
@@ -77,8 +50,14 @@ fn world() -> (Box<Grid>, Box<Scan>) {
     (g, s)
 }
 
+/// Every planner's step (and re-planning) allocates nothing once running.
 #[test]
 fn every_planner_step_allocates_nothing_in_steady_state() {
+    // A broken counter would pass everything below: it must see this Box first.
+    let boxed = allocations_during(|| {
+        std::hint::black_box(Box::new([0u8; 64]));
+    });
+    assert!(boxed >= 1, "a Box was allocated, the counter saw {boxed}");
     let (grid, scan) = world();
     for (name, local) in [
         ("random-walk", LocalPlanner::Dwa),
@@ -122,16 +101,14 @@ fn every_planner_step_allocates_nothing_in_steady_state() {
         for tick in 0..50 {
             step(&mut p, tick, &mut pose);
         }
-        COUNT.store(0, Ordering::SeqCst);
-        ON.store(true, Ordering::SeqCst);
-        for tick in 50..150 {
-            if replan && tick % 40 == 0 {
-                p.replan();
+        let n = allocations_during(|| {
+            for tick in 50..150 {
+                if replan && tick % 40 == 0 {
+                    p.replan();
+                }
+                step(&mut p, tick, &mut pose);
             }
-            step(&mut p, tick, &mut pose);
-        }
-        ON.store(false, Ordering::SeqCst);
-        let n = COUNT.load(Ordering::SeqCst);
+        });
         assert_eq!(n, 0, "{name} ({local:?}) allocated {n} times in 100 steps");
     }
 }

@@ -6,8 +6,9 @@
 //!
 //! - Every publish also signals the topic's event service, so subscribers sleep in a WaitSet:
 //!   no busy loops, no sleep-polling.
-//! - iceoryx2's own signal handling is disabled on nodes and WaitSets; SIGINT/SIGTERM go to a
-//!   `ctrlc` handler that sets the shutdown flag (iceoryx2 would silently replace it otherwise).
+//! - iceoryx2's own signal handling is disabled on nodes; SIGINT/SIGTERM go to a `ctrlc`
+//!   handler that sets the shutdown flag (iceoryx2 would silently replace it otherwise). The
+//!   [`WaitSet`] polls the listeners' sockets itself: iceoryx2's allocates on every wake-up.
 //! - Dead nodes' stale resources are cleaned when a process starts.
 //! - Per-topic statistics (rate, dropped, invalid, latency from `origin_ns`) are published on
 //!   `stack/stats` once a second.

@@ -5,8 +5,9 @@ use crate::ports::{Publisher, Subscriber, Waker};
 use crate::stats::StatsRegistry;
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
 use mole_types::{Message, Stats, Topic, topics};
+use nix::poll::{PollFd, PollFlags, PollTimeout};
+use std::os::fd::{AsFd, AsRawFd, BorrowedFd, RawFd};
 use std::rc::Rc;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -374,16 +375,20 @@ impl Context {
             .enable_safe_overflow(!lockstep)
             .open_or_create()
             .map_err(|e| {
-                let theirs = list_topics(&self.namespace)
-                    .into_iter()
-                    .find(|(t, _)| t == topic.name)
-                    .map(|(_, type_name)| type_name);
                 failed(describe_open_error(
                     &format!("{e:?}"),
-                    M::TYPE_NAME,
-                    theirs.as_deref(),
+                    &PayloadLayout::of::<M>(),
+                    recorded_payload(&name).as_ref(),
                 ))
             })?;
+        // iceoryx2 opens a service whose payload has our type name and size but a stricter
+        // alignment; that is still another layout (another language's definition), so refuse
+        // anything but the exact one.
+        let ours = PayloadLayout::of::<M>();
+        let found = PayloadLayout::recorded(&pubsub.static_config().message_type_details().payload);
+        if (found.size, found.alignment) != (ours.size, ours.alignment) {
+            return Err(failed(layout_mismatch(&ours, &found)));
+        }
         let event = self
             .node
             .service_builder(&name)
@@ -527,14 +532,10 @@ impl Context {
         }))
     }
 
-    /// A WaitSet for this process's wake-ups (signal handling disabled).
+    /// A WaitSet for this process's wake-ups.
     pub fn waitset(&self) -> Result<WaitSet, RuntimeError> {
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
         Ok(WaitSet {
-            waitset,
+            sockets: core::cell::RefCell::new(Vec::new()),
             listeners: core::cell::RefCell::new(Vec::new()),
             probes: core::cell::RefCell::new(Vec::new()),
             missed_signal: core::cell::Cell::new(false),
@@ -565,11 +566,10 @@ impl Context {
         self.last_stats = Instant::now();
         let (cpu_ns, max_rss_bytes) = resource_usage();
         let steps = self.steps;
-        let role = self.role.clone();
-        let registry = self.stats.clone();
+        let (role, registry) = (&self.role, &self.stats);
         if let Some(publisher) = self.stats_publisher.as_mut() {
             let result = publisher.publish(steps, 0, |stats| {
-                mole_types::write_name(&mut stats.process, &role);
+                mole_types::write_name(&mut stats.process, role);
                 stats.pid = std::process::id();
                 stats.cpu_ns = cpu_ns;
                 stats.max_rss_bytes = max_rss_bytes;
@@ -598,17 +598,78 @@ fn resource_usage() -> (u64, u64) {
     }
 }
 
-/// Turns iceoryx2's open errors into a sentence; a type mismatch names both sides.
-fn describe_open_error(debug: &str, ours: &str, theirs: Option<&str>) -> String {
+/// A payload's layout as iceoryx2 records it for a service: type name, size, alignment.
+struct PayloadLayout {
+    type_name: String,
+    size: usize,
+    alignment: usize,
+}
+
+impl PayloadLayout {
+    /// The layout of this process's message type.
+    fn of<M: Message>() -> PayloadLayout {
+        PayloadLayout {
+            type_name: M::TYPE_NAME.to_string(),
+            size: core::mem::size_of::<M>(),
+            alignment: core::mem::align_of::<M>(),
+        }
+    }
+
+    /// The layout a service records.
+    fn recorded(
+        detail: &iceoryx2::service::static_config::message_type_details::TypeDetail,
+    ) -> PayloadLayout {
+        PayloadLayout {
+            type_name: detail.type_name().to_string(),
+            size: detail.size(),
+            alignment: detail.alignment(),
+        }
+    }
+}
+
+impl std::fmt::Display for PayloadLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "`{}` ({} bytes, aligned to {})",
+            self.type_name, self.size, self.alignment
+        )
+    }
+}
+
+/// The payload layout of the publish-subscribe service `name`, if it exists.
+fn recorded_payload(name: &ServiceName) -> Option<PayloadLayout> {
+    use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as Recorded;
+    let details = ipc::Service::details(
+        name,
+        Config::global_config(),
+        MessagingPattern::PublishSubscribe,
+    )
+    .ok()??;
+    match details.static_details.messaging_pattern() {
+        Recorded::PublishSubscribe(config) => Some(PayloadLayout::recorded(
+            &config.message_type_details().payload,
+        )),
+        _ => None,
+    }
+}
+
+/// The sentence for a topic whose service carries another layout than this process's.
+fn layout_mismatch(ours: &PayloadLayout, found: &PayloadLayout) -> String {
+    format!(
+        "expected {ours}, found {found}: this process and the topic disagree on the message \
+         layout; build both sides from the same shared-types"
+    )
+}
+
+/// Turns iceoryx2's open errors into a sentence; a type mismatch names both layouts.
+fn describe_open_error(debug: &str, ours: &PayloadLayout, found: Option<&PayloadLayout>) -> String {
     if debug.contains("IncompatibleTypes") {
-        match theirs {
-            Some(theirs) => format!(
-                "the stack carries `{theirs}` on this topic, this process speaks `{ours}`: their \
-                 layouts differ, rebuild one side against the other's shared-types"
-            ),
+        match found {
+            Some(found) => layout_mismatch(ours, found),
             None => format!(
                 "another process uses a different message type on this topic (this process \
-                 speaks `{ours}`)"
+                 speaks {ours})"
             ),
         }
     } else if debug.contains("VersionMismatch") || debug.contains("IncompatibleVersion") {
@@ -630,10 +691,15 @@ pub enum Wake {
 }
 
 /// Sleeps until data on an attached subscriber, a deadline, or a shutdown.
+///
+/// It sleeps in poll(2) on the sockets of the attached listeners rather than in iceoryx2's
+/// WaitSet, which allocates on every wake-up: a step of a process allocates nothing.
 pub struct WaitSet {
-    waitset: iceoryx2::waitset::WaitSet<ipc::Service>,
-    /// Every attached listener: drained on each wake-up, so a topic the process no longer
-    /// reads (world/map after the first sample) cannot keep the WaitSet awake.
+    /// What poll(2) watches: the sockets of the attached listeners, kept between waits.
+    sockets: core::cell::RefCell<Vec<PollFd<'static>>>,
+    /// Every listener ever attached: drained on each wake-up, so a topic the process no longer
+    /// reads (world/map after the first sample) cannot keep the WaitSet awake. Holding them
+    /// keeps their sockets open for as long as the WaitSet lives.
     listeners: core::cell::RefCell<Vec<Rc<iceoryx2::port::listener::Listener<ipc::Service>>>>,
     /// The queues of the attached subscribers, looked at when a wait ends without a signal.
     probes: core::cell::RefCell<Vec<Rc<dyn crate::ports::Probe>>>,
@@ -673,7 +739,18 @@ impl Anticipation {
 
 /// Keeps a subscriber attached to a [`WaitSet`] while it lives.
 pub struct Attachment<'w, 'a> {
-    _guard: iceoryx2::waitset::WaitSetGuard<'w, 'a, ipc::Service>,
+    waitset: &'w WaitSet,
+    socket: RawFd,
+    _waker: core::marker::PhantomData<&'a Waker>,
+}
+
+impl Drop for Attachment<'_, '_> {
+    fn drop(&mut self) {
+        self.waitset
+            .sockets
+            .borrow_mut()
+            .retain(|s| s.as_fd().as_raw_fd() != self.socket);
+    }
 }
 
 impl WaitSet {
@@ -685,13 +762,26 @@ impl WaitSet {
                 waker.topic
             )));
         };
-        let guard = self
-            .waitset
-            .attach_notification(&**listener)
-            .map_err(|e| RuntimeError::Wait(format!("attach {}: {e:?}", waker.topic)))?;
+        // SAFETY: the socket belongs to the listener, which `listeners` keeps alive (and the
+        // socket open) for as long as this WaitSet, and so its `sockets`, lives.
+        let socket = unsafe { listener.file_descriptor().native_handle() };
+        let mut sockets = self.sockets.borrow_mut();
+        if sockets.iter().any(|s| s.as_fd().as_raw_fd() == socket) {
+            return Err(RuntimeError::Wait(format!(
+                "{} is attached already",
+                waker.topic
+            )));
+        }
+        // SAFETY: see above; the entry leaves `sockets` when the attachment is dropped.
+        let fd = unsafe { BorrowedFd::borrow_raw(socket) };
+        sockets.push(PollFd::new(fd, PollFlags::POLLIN));
         self.listeners.borrow_mut().push(listener.clone());
         self.probes.borrow_mut().push(waker.probe.clone());
-        Ok(Attachment { _guard: guard })
+        Ok(Attachment {
+            waitset: self,
+            socket,
+            _waker: core::marker::PhantomData,
+        })
     }
 
     /// Be awake when `trigger`'s next sample is due instead of paying a wake-up from idle for
@@ -743,8 +833,8 @@ impl WaitSet {
                 self.drain_listeners();
                 return Ok(Wake::Timeout);
             }
-            // iceoryx2's WaitSet waits in whole milliseconds, rounded up (epoll): the last
-            // fraction of a deadline is slept precisely, so a 100 Hz world ticks on time.
+            // poll(2) waits in whole milliseconds: the last fraction of a deadline is slept
+            // precisely, so a 100 Hz world ticks on time.
             if let Some(left) = until_deadline
                 && left < Duration::from_millis(1)
             {
@@ -769,8 +859,8 @@ impl WaitSet {
                     }
                     continue;
                 }
-                // iceoryx2's WaitSet waits in whole milliseconds, rounded up (epoll): sleep the
-                // last fraction precisely, or the window would open up to 1 ms late.
+                // poll(2) waits in whole milliseconds: sleep the last fraction precisely, or
+                // the window would open up to 1 ms late.
                 let until_from = from - now;
                 if until_from <= Duration::from_millis(1) {
                     drop(anticipation);
@@ -780,26 +870,16 @@ impl WaitSet {
                 timeout = timeout.min(Duration::from_millis(until_from.as_millis() as u64));
             }
             drop(anticipation);
-            let timeout = Duration::from_millis(timeout.as_millis().max(1) as u64);
-            let mut woke = false;
-            let result = self
-                .waitset
-                .wait_and_process_once_with_timeout(
-                    |_| {
-                        woke = true;
-                        CallbackProgression::Continue
-                    },
-                    timeout,
-                )
-                .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
-            match result {
-                WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
-                    if ctx.shutdown_requested() {
-                        return Ok(Wake::Shutdown);
-                    }
+            let timeout =
+                PollTimeout::try_from(timeout.as_millis().max(1)).unwrap_or(PollTimeout::MAX);
+            let woke = match nix::poll::poll(&mut self.sockets.borrow_mut(), timeout) {
+                Ok(ready) => ready > 0,
+                Err(nix::errno::Errno::EINTR) if ctx.shutdown_requested() => {
+                    return Ok(Wake::Shutdown);
                 }
-                WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {}
-            }
+                Err(nix::errno::Errno::EINTR) => false,
+                Err(e) => return Err(RuntimeError::Wait(e.desc().to_string())),
+            };
             if woke {
                 if let Some(a) = self.anticipation.borrow().as_ref()
                     && a.trigger.has_data()

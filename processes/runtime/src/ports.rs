@@ -291,6 +291,21 @@ pub struct Waker {
     pub(crate) probe: Rc<dyn Probe>,
 }
 
+impl Waker {
+    /// The listener's socket, for tests that lose a wake-up signal on purpose (reading its
+    /// datagram behind iceoryx2's back); `None` for a passive subscriber.
+    #[doc(hidden)]
+    pub fn listener_fd(&self) -> Option<std::os::fd::BorrowedFd<'_>> {
+        use iceoryx2::prelude::FileDescriptorBased;
+        self.listener.as_ref().map(|listener| {
+            // SAFETY: the descriptor belongs to the listener, which outlives the borrow.
+            unsafe {
+                std::os::fd::BorrowedFd::borrow_raw(listener.file_descriptor().native_handle())
+            }
+        })
+    }
+}
+
 /// Whether a subscriber's queue holds a sample: a look at shared memory, no system call.
 pub(crate) trait Probe {
     fn has_data(&self) -> bool;

@@ -1,10 +1,11 @@
 //! The runtime against real iceoryx2 services, in one process: publish in place, wake up,
 //! validate, count. Each test uses its own namespace.
 
-use mole_runtime::{ClockMode, CommonArgs, Context, Wake};
+use iceoryx2::prelude::*;
+use mole_runtime::{ClockMode, CommonArgs, Context, Wake, Waker};
 use mole_types::topics;
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 fn args(test: &str, mode: ClockMode) -> CommonArgs {
@@ -64,6 +65,78 @@ fn a_published_message_wakes_the_subscriber_and_arrives_intact() {
             .unwrap();
         assert_eq!(wake, Wake::Timeout);
         producer.count_step();
+    }
+}
+
+/// Whether a wake-up datagram waits in the listener's socket.
+fn signal_pending(waker: &Waker) -> bool {
+    use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
+    let socket = waker.listener_fd().expect("an active subscriber");
+    let mut watched = [PollFd::new(socket, PollFlags::POLLIN)];
+    poll(&mut watched, PollTimeout::ZERO).expect("poll the listener's socket") > 0
+}
+
+/// Reads the wake-up datagrams out of the listener's socket behind iceoryx2's back, leaving
+/// the listener marked "notified" with nothing to wake a WaitSet: the state a notification
+/// leaves when it lands while iceoryx2 0.10 empties the socket. Returns how many it read.
+fn lose_pending_signals(waker: &Waker) -> usize {
+    let socket = waker.listener_fd().expect("an active subscriber");
+    let mut lost = 0;
+    while signal_pending(waker) {
+        nix::unistd::read(socket, &mut [0u8; 64]).expect("read a datagram");
+        lost += 1;
+    }
+    lost
+}
+
+/// A listener left "notified" with an empty socket (a lost signal) costs one look-again
+/// interval, not the stack: the wait still returns with the sample, and resets the listener.
+#[test]
+fn the_waitset_wakes_for_a_sample_whose_signal_was_lost() {
+    for mode in [ClockMode::Lockstep, ClockMode::Realtime] {
+        let args = args(&format!("lost-signal-{mode}"), mode);
+        let producer = context("producer", &args);
+        let mut consumer = context("consumer", &args);
+        let mut cmd_pub = producer.publisher(topics::PLANNING_CMD).unwrap();
+        let mut cmd_sub = consumer.subscriber(topics::PLANNING_CMD).unwrap();
+        let waitset = consumer.waitset().unwrap();
+        let cmd_wake = cmd_sub.waker();
+        let _attached = waitset.attach(&cmd_wake).unwrap();
+
+        publish_cmds(&mut cmd_pub, &[1]);
+        assert_eq!(
+            lose_pending_signals(&cmd_wake),
+            1,
+            "{mode}: step 1 signalled"
+        );
+        assert!(cmd_sub.update());
+        publish_cmds(&mut cmd_pub, &[2]);
+        assert!(
+            !signal_pending(&cmd_wake),
+            "{mode}: iceoryx2 no longer coalesces a signal away after a lost one: this test \
+             does not reproduce the race any more"
+        );
+        // Lockstep looks again after LOCKSTEP_RECHECK without a deadline; realtime when its
+        // statistics are due. The deadline only guards against sleeping forever.
+        let deadline = match mode {
+            ClockMode::Lockstep => None,
+            ClockMode::Realtime => Some(Instant::now() + Duration::from_secs(10)),
+        };
+        let wake = waitset.wait(&mut consumer, deadline).unwrap();
+        assert_eq!(wake, Wake::Data, "{mode}: step 2 came without its signal");
+        assert!(cmd_sub.update());
+        assert_eq!(cmd_sub.tick(), Some(2), "{mode}");
+
+        // The wait reset the listener: the next publish signals it again.
+        publish_cmds(&mut cmd_pub, &[3]);
+        assert!(
+            signal_pending(&cmd_wake),
+            "{mode}: the listener still swallows every signal"
+        );
+        let wake = waitset.wait(&mut consumer, deadline).unwrap();
+        assert_eq!(wake, Wake::Data, "{mode}");
+        assert!(cmd_sub.update());
+        assert_eq!(cmd_sub.tick(), Some(3), "{mode}");
     }
 }
 
@@ -242,31 +315,183 @@ fn a_different_layout_on_a_topic_is_refused_naming_both_types() {
     );
 }
 
+/// Creates `planning/cmd` in `namespace` the way a process in another language does: with
+/// iceoryx2's type details written by hand, the type name right, the size and alignment as
+/// given, every other setting as the topic constant has it.
+fn foreign_cmd_service(
+    namespace: &str,
+    size: usize,
+    alignment: usize,
+) -> (
+    Node<ipc::Service>,
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        ipc::Service,
+        [iceoryx2::service::marker::CustomPayloadMarker],
+        (),
+    >,
+) {
+    use iceoryx2::service::static_config::message_type_details::{TypeDetail, TypeVariant};
+    let topic = topics::PLANNING_CMD;
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .unwrap();
+    let name = topics::service_name(namespace, topic.name);
+    let name: ServiceName = name.as_str().try_into().unwrap();
+    let layout = TypeDetail::__internal_new_from_parts(
+        TypeVariant::FixedSize,
+        "mole.Cmd.v1",
+        size,
+        alignment,
+    )
+    .unwrap();
+    // SAFETY: no port of this service is ever created; it only holds the foreign layout.
+    let builder = unsafe {
+        node.service_builder(&name)
+            .publish_subscribe::<[iceoryx2::service::marker::CustomPayloadMarker]>()
+            .__internal_set_payload_type_details(&layout)
+    };
+    let service = builder
+        .history_size(topic.history)
+        .subscriber_max_buffer_size(topic.buffer)
+        .subscriber_max_borrowed_samples(2)
+        .max_publishers(topic.max_publishers)
+        .max_subscribers(topic.max_subscribers)
+        .enable_safe_overflow(true)
+        .create()
+        .unwrap();
+    (node, service)
+}
+
+/// A topic whose layout has our type name but another size or alignment is refused for a
+/// subscriber and a publisher, naming the topic, the expected and the found layout.
+#[test]
+fn the_same_type_name_with_another_size_or_alignment_is_refused() {
+    let ours = format!(
+        "expected `mole.Cmd.v1` ({} bytes, aligned to {})",
+        size_of::<mole_types::Cmd>(),
+        align_of::<mole_types::Cmd>()
+    );
+    let (size, alignment) = (size_of::<mole_types::Cmd>(), align_of::<mole_types::Cmd>());
+    let layouts = [
+        (size + 8, alignment),
+        (size - 8, alignment),
+        (size, alignment / 2),
+        (size, alignment * 2),
+    ];
+    for (case, (size, alignment)) in layouts.into_iter().enumerate() {
+        let args = args(&format!("layout-{case}"), ClockMode::Realtime);
+        let _foreign = foreign_cmd_service(&args.namespace, size, alignment);
+        let ctx = context("planning", &args);
+        let refusals = [
+            ctx.subscriber(topics::PLANNING_CMD).err(),
+            ctx.publisher(topics::PLANNING_CMD).err(),
+        ];
+        for (port, refusal) in ["subscriber", "publisher"].iter().zip(refusals) {
+            let found = format!("found `mole.Cmd.v1` ({size} bytes, aligned to {alignment})");
+            let Some(err) = refusal else {
+                panic!("a {port} accepted `mole.Cmd.v1` of {size} bytes aligned to {alignment}")
+            };
+            let text = err.to_string();
+            assert!(
+                text.contains("`planning/cmd`") && text.contains(&ours) && text.contains(&found),
+                "{port}: {text}"
+            );
+        }
+    }
+}
+
+/// The services and nodes of `namespace` that iceoryx2 still knows, alive or not.
+fn leftovers(namespace: &str) -> Vec<String> {
+    use iceoryx2::node::NodeView;
+    let prefix = format!("mole/{namespace}/");
+    let mut names = Vec::new();
+    ipc::Service::list(Config::global_config(), |service| {
+        let name = service.static_details.name().as_str();
+        if name.starts_with(&prefix) {
+            names.push(format!("service {name}"));
+        }
+        CallbackProgression::Continue
+    })
+    .expect("list the services");
+    Node::<ipc::Service>::list(Config::global_config(), |node| {
+        let details = match &node {
+            NodeState::Alive(view) => view.details(),
+            NodeState::Dead(view) => view.details(),
+            NodeState::Inaccessible(_) | NodeState::Undefined(_) => &None,
+        };
+        if let Some(details) = details
+            && details.name().as_str().starts_with(&prefix)
+        {
+            names.push(format!("node {}", details.name().as_str()));
+        }
+        CallbackProgression::Continue
+    })
+    .expect("list the nodes");
+    names
+}
+
+/// A test's worker thread, stopped and joined when the test ends, passed or failed: a
+/// shutdown request makes a waiting lockstep publisher drop its sample, so the thread ends
+/// and its nodes and services are gone before the test binary exits.
+struct Worker {
+    shutdown: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.shutdown.store(true, Ordering::SeqCst);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// A lockstep publisher stops waiting for a full queue after STUCK_CONSUMER or a shutdown,
+/// and the test leaves no node or service of its namespace behind.
 #[test]
 fn a_lockstep_publisher_gives_up_on_a_subscriber_that_reads_nothing() {
     // In a thread, so that a publisher waiting forever fails the test instead of hanging it.
+    let args = args("stuck", ClockMode::Lockstep);
+    let shutdown = Arc::new(AtomicBool::new(false));
     let (done, finished) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let args = args("stuck", ClockMode::Lockstep);
-        let producer = context("producer", &args);
-        let consumer = context("consumer", &args);
-        let mut cmd_pub = producer.publisher(topics::PLANNING_CMD).unwrap();
-        let mut cmd_sub = consumer.subscriber(topics::PLANNING_CMD).unwrap();
-        let buffer = topics::PLANNING_CMD.buffer as u64;
-        let ticks: Vec<u64> = (0..buffer).collect();
-        publish_cmds(&mut cmd_pub, &ticks);
-        // The queue is full and nobody reads it: the next sample waits STUCK_CONSUMER, then
-        // is dropped for this subscriber; after a shutdown request it does not wait at all.
-        publish_cmds(&mut cmd_pub, &[buffer]);
-        producer.request_shutdown();
-        publish_cmds(&mut cmd_pub, &[buffer + 1]);
-        let mut received = Vec::new();
-        cmd_sub.drain(|c| received.push(c.header.tick));
-        let _ = done.send(received);
-    });
+    let thread = {
+        let (args, shutdown) = (args.clone(), shutdown.clone());
+        std::thread::spawn(move || {
+            let received = {
+                let producer = Context::with_shutdown_flag("producer", &args, shutdown.clone())
+                    .expect("context");
+                let consumer =
+                    Context::with_shutdown_flag("consumer", &args, shutdown).expect("context");
+                let mut cmd_pub = producer.publisher(topics::PLANNING_CMD).unwrap();
+                let mut cmd_sub = consumer.subscriber(topics::PLANNING_CMD).unwrap();
+                let buffer = topics::PLANNING_CMD.buffer as u64;
+                let ticks: Vec<u64> = (0..buffer).collect();
+                publish_cmds(&mut cmd_pub, &ticks);
+                // The queue is full and nobody reads it: the next sample waits
+                // STUCK_CONSUMER, then is dropped for this subscriber; after a shutdown
+                // request it does not wait at all.
+                publish_cmds(&mut cmd_pub, &[buffer]);
+                producer.request_shutdown();
+                publish_cmds(&mut cmd_pub, &[buffer + 1]);
+                let mut received = Vec::new();
+                cmd_sub.drain(|c| received.push(c.header.tick));
+                received
+            };
+            // Every port and node is gone before the test learns the result.
+            let _ = done.send(received);
+        })
+    };
+    let worker = Worker {
+        shutdown,
+        thread: Some(thread),
+    };
     let received = finished
         .recv_timeout(mole_runtime::STUCK_CONSUMER * 5)
         .expect("the publisher gave up on the full queue");
+    drop(worker);
     let buffer = topics::PLANNING_CMD.buffer as u64;
     assert_eq!(received, (0..buffer).collect::<Vec<_>>());
+    assert_eq!(leftovers(&args.namespace), Vec::<String>::new());
 }

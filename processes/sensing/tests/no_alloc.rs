@@ -7,8 +7,14 @@ use mole_types::*;
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
+/// Every sensor model's step allocates nothing once running.
 #[test]
 fn a_sensing_step_does_not_allocate() {
+    // A broken counter would pass everything below: it must see this Box first.
+    let boxed = allocations_during(|| {
+        std::hint::black_box(Box::new([0u8; 64]));
+    });
+    assert!(boxed >= 1, "a Box was allocated, the counter saw {boxed}");
     let scenario = mole_world::load_scenario(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../scenarios/default.toml"
