@@ -24,7 +24,7 @@ use crate::order;
 /// Where `mole up` looks when no launch file is given.
 pub const DEFAULT_LAUNCH_FILE: &str = "launch/stacks/default.toml";
 
-/// How the stack keeps time (DESIGN.md "Clock modes").
+/// How the stack keeps time (docs/architecture.md, "Clock modes").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {

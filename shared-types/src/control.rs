@@ -1,4 +1,4 @@
-//! `stack/control`: the launcher's request-response service (DESIGN.md, "Topics"). `mole swap`,
+//! `stack/control`: the launcher's request-response service (docs/architecture.md). `mole swap`,
 //! `mole stop` and `mole status` send a [`ControlRequest`]; the running `mole up` answers with one
 //! [`ControlResponse`].
 

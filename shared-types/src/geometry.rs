@@ -21,7 +21,7 @@ impl Pose2 {
     }
 }
 
-/// An axis-aligned square obstacle of side `side` centred at `(cx, cy)` (seed §1.3).
+/// An axis-aligned square obstacle of side `side` centred at `(cx, cy)` (algorithms §1.3).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
 #[type_name("mole.Square.v1")]

@@ -270,7 +270,7 @@ fn topics() -> Vec<TopicLayout> {
 /// The ctypes expression of a field's Rust type (`[f32; 2]` → `ctypes.c_float * 2`).
 ///
 /// # Panics
-/// On a type no message may hold (DESIGN.md allows only integers, floats, arrays and the
+/// On a type no message may hold (the message rules allow only integers, floats, arrays and the
 /// message structs): the layout table itself is then wrong.
 fn ctype(ty: &str, structs: &[&str]) -> String {
     if let Some((element, n)) = ty

@@ -1,6 +1,6 @@
 //! Every message mole's processes exchange, with its topic, its validation and its layout.
 //!
-//! The rules (DESIGN.md, "Messages"): `#[repr(C)]`, an explicit versioned `type_name`, only
+//! The rules (docs/architecture.md, "Messages"): `#[repr(C)]`, an explicit versioned `type_name`, only
 //! fixed-size integers, floats and arrays of them, explicit `_pad` fields, sizes and offsets
 //! asserted at compile time. Every bit pattern is a valid value (`bytemuck::Pod`), so a buggy or
 //! hostile publisher cannot cause undefined behaviour; `validate()` then says whether the values

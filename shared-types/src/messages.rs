@@ -1,4 +1,4 @@
-//! The message types, one per topic of DESIGN.md's topic table (plus `RunStatus`, the monitor's
+//! The message types, one per topic of docs/architecture.md's process table (plus `RunStatus`, the monitor's
 //! live summary). Capacities are fixed; counts say how much of an array is in use.
 
 use crate::geometry::{BeaconSite, Contact, Square};
@@ -356,7 +356,7 @@ pub struct TactileReading {
     pub _pad: f32,
 }
 
-/// `sensing/tactile`: k force vectors around the rim (seed §2.2's f_net).
+/// `sensing/tactile`: k force vectors around the rim (algorithms §2.2's f_net).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
 #[type_name("mole.Tactile.v1")]
@@ -564,7 +564,7 @@ pub struct Particle {
     pub w: f32,
 }
 
-/// `localization/particles`: the particle set Ψ (seed §6.7), when the PF runs.
+/// `localization/particles`: the particle set Ψ (algorithms §6.7), when the PF runs.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
 #[type_name("mole.Particles.v1")]
@@ -602,12 +602,12 @@ impl Message for Particles {
 // mapping/*
 // ---------------------------------------------------------------------------------------------
 
-/// `Grid::kind`: the frontier grid, cells 0 unexplored, 1 free, 2 occupied (seed §5.2).
+/// `Grid::kind`: the frontier grid, cells 0 unexplored, 1 free, 2 occupied (algorithms §5.2).
 pub const GRID_FRONTIER: u32 = 0;
-/// `Grid::kind`: the contact grid, cells 0 free/unknown, 1 occupied (seed §2.2).
+/// `Grid::kind`: the contact grid, cells 0 free/unknown, 1 occupied (algorithms §2.2).
 pub const GRID_CONTACT: u32 = 1;
 
-/// Frontier-grid cell values (seed §5.2).
+/// Frontier-grid cell values (algorithms §5.2).
 pub const CELL_UNEXPLORED: u8 = 0;
 pub const CELL_FREE: u8 = 1;
 pub const CELL_OCCUPIED: u8 = 2;

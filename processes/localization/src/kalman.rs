@@ -1,6 +1,6 @@
 //! The Kalman correction step, generic over the state size N and the measurement size M, on
-//! nalgebra's stack-allocated `SMatrix` (no allocation). The EKF (seed §6.6) calls it with its
-//! linearised H_t; a linear KF (seed §6.5) calls it with C_t.
+//! nalgebra's stack-allocated `SMatrix` (no allocation). The EKF (algorithms §6.6) calls it with its
+//! linearised H_t; a linear KF (algorithms §6.5) calls it with C_t.
 
 use nalgebra::{Cholesky, SMatrix, SVector};
 use thiserror::Error;
@@ -43,7 +43,7 @@ pub fn symmetrize<const N: usize>(m: &mut SMatrix<f64, N, N>) {
     }
 }
 
-/// One Kalman correction with innovation ν = z − h(μ̄) (seed §6.5/§6.6, correction step):
+/// One Kalman correction with innovation ν = z − h(μ̄) (algorithms §6.5/§6.6, correction step):
 /// S = H Σ Hᵀ + Q, K = Σ Hᵀ S⁻¹, μ ← μ + K ν, and the covariance in Joseph form
 /// Σ ← (I − K H) Σ (I − K H)ᵀ + K Q Kᵀ, symmetrised.
 ///

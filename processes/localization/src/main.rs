@@ -16,7 +16,10 @@ const PARTICLES_EVERY: u64 = 10;
 const TAKEOVER_GRACE: Duration = Duration::from_secs(1);
 
 #[derive(Debug, Parser)]
-#[command(name = "mole-localization", about = "mole's pose estimators (seed §6)")]
+#[command(
+    name = "mole-localization",
+    about = "mole's pose estimators (algorithms §6)"
+)]
 struct Args {
     #[command(flatten)]
     common: CommonArgs,

@@ -1,11 +1,11 @@
-//! The contact grid of seed §2.2: M_t, 1 where the robot has touched an obstacle, else 0.
+//! The contact grid of algorithms §2.2: M_t, 1 where the robot has touched an obstacle, else 0.
 
 use crate::{GridGeometry, MappingError};
 use mole_types::{GRID_CONTACT, Grid, MAX_TACTILE, Pose2, Tactile, wrap_angle};
 
-/// Contact points on the rim, robot frame (m), from one tactile reading (seed §2.3).
+/// Contact points on the rim, robot frame (m), from one tactile reading (algorithms §2.3).
 ///
-/// Seed §2.3 relates f_net = J·p_net with J unspecified; per DESIGN.md's erratum we read the
+/// Algorithms §2.3 relates f_net = J·p_net with J unspecified; per docs/errata.md we read the
 /// forces directly instead: a sensor whose |f| exceeds `force_threshold` is touching, angularly
 /// adjacent touching sensors (no quiet sensor between them) share one contact, and that contact
 /// lies on the rim opposite their summed force, at direction atan2(−F_y, −F_x), because the
@@ -88,12 +88,12 @@ pub fn estimate_contacts(
     n
 }
 
-/// Seed §2 contact mapping, with the erratum of DESIGN.md: read J as the rotation from sensor to
+/// Algorithms §2 contact mapping, with the erratum in docs/errata.md: read J as the rotation from sensor to
 /// world frame; contact point = robot position + R(θ)·(sensor offset + estimated contact offset).
 #[derive(Debug, Clone)]
 pub struct ContactGrid {
     geometry: GridGeometry,
-    /// Seed §2.2's M_t: 1 occupied, 0 free or unknown; M_0 is all zeros.
+    /// Algorithms §2.2's M_t: 1 occupied, 0 free or unknown; M_0 is all zeros.
     cells: Vec<u8>,
     /// Contact points of the last `integrate_tactile`, world frame.
     points: [(f64, f64); MAX_TACTILE],
@@ -101,7 +101,7 @@ pub struct ContactGrid {
 }
 
 impl ContactGrid {
-    /// An all-zero grid (seed §2.2: M_0 is a null matrix) over `[0, width_m] × [0, height_m]`.
+    /// An all-zero grid (algorithms §2.2: M_0 is a null matrix) over `[0, width_m] × [0, height_m]`.
     pub fn new(width_m: f64, height_m: f64, resolution: f64) -> Result<ContactGrid, MappingError> {
         let geometry = GridGeometry::for_arena(width_m, height_m, resolution)?;
         Ok(Self {
@@ -117,7 +117,7 @@ impl ContactGrid {
         &self.geometry
     }
 
-    /// Seed §2.2's cells (0 free or unknown, 1 occupied), row-major.
+    /// Algorithms §2.2's cells (0 free or unknown, 1 occupied), row-major.
     pub fn cells(&self) -> &[u8] {
         &self.cells
     }
@@ -145,8 +145,8 @@ impl ContactGrid {
     }
 
     /// From one tactile reading taken at `pose` (estimated): estimates the contacts on the rim
-    /// ([`estimate_contacts`]), transforms each with the pose into the world frame (DESIGN.md
-    /// erratum: p_world = (x, y) + R(θ)·p_robot), marks its cell 1 and returns the points that
+    /// ([`estimate_contacts`]), transforms each with the pose into the world frame (docs/errata.md,
+    /// §2.3: p_world = (x, y) + R(θ)·p_robot), marks its cell 1 and returns the points that
     /// fell inside the grid, so the caller can also mark them in the frontier grid. A non-finite
     /// pose gives no contact.
     pub fn integrate_tactile(

@@ -1,4 +1,4 @@
-//! The frontier grid of seed §5.2 (0 unexplored, 1 free, 2 occupied), estimated as an occupancy
+//! The frontier grid of algorithms §5.2 (0 unexplored, 1 free, 2 occupied), estimated as an occupancy
 //! grid in log-odds (Thrun, Burgard & Fox, *Probabilistic Robotics*, §9.2, Table 9.1).
 
 use crate::{GridGeometry, MappingError};
@@ -82,7 +82,7 @@ impl LogOddsParams {
         Ok(())
     }
 
-    /// Seed §5.2's cell value for log-odds `l`.
+    /// Algorithms §5.2's cell value for log-odds `l`.
     #[inline]
     pub fn classify(&self, l: f32) -> u8 {
         if l >= self.threshold {
@@ -103,14 +103,14 @@ const MARK_MISS: u8 = 1;
 const MARK_HIT: u8 = 2;
 
 /// Occupancy by log-odds with ray traversal (Thrun, Probabilistic Robotics §9.2, inverse sensor
-/// model), thresholded to seed §5.2's 0/1/2.
+/// model), thresholded to algorithms §5.2's 0/1/2.
 #[derive(Debug, Clone)]
 pub struct FrontierGrid {
     geometry: GridGeometry,
     params: LogOddsParams,
     /// l_t,i per cell (Probabilistic Robotics eq. 9.7's log-odds, prior 0).
     log_odds: Vec<f32>,
-    /// Seed §5.2's M_t, kept in step with `log_odds`.
+    /// Algorithms §5.2's M_t, kept in step with `log_odds`.
     cells: Vec<u8>,
     /// Per-cell update of the scan being integrated (MARK_*), all MARK_NONE between scans.
     marks: Vec<u8>,
@@ -154,7 +154,7 @@ impl FrontierGrid {
         &self.params
     }
 
-    /// Seed §5.2's cells (0 unexplored, 1 free, 2 occupied), row-major, maintained incrementally.
+    /// Algorithms §5.2's cells (0 unexplored, 1 free, 2 occupied), row-major, maintained incrementally.
     pub fn cells(&self) -> &[u8] {
         &self.cells
     }

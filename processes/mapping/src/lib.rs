@@ -1,9 +1,9 @@
-//! Mapping: contact grid (seed §2) and frontier grid (seed §5.2).
+//! Mapping: contact grid (algorithms §2) and frontier grid (algorithms §5.2).
 //!
 //! Both grids cover the arena `[0, W] × [0, H]` at the world's grid resolution and are built from
 //! the *estimated* pose. The frontier grid ([`FrontierGrid`]) fuses lidar, footprint and touch in
-//! log-odds and publishes seed §5.2's 0 unexplored / 1 free / 2 occupied; the contact grid
-//! ([`ContactGrid`]) is seed §2.2's map M_t of touched cells (0 free or unknown, 1 occupied).
+//! log-odds and publishes algorithms §5.2's 0 unexplored / 1 free / 2 occupied; the contact grid
+//! ([`ContactGrid`]) is algorithms §2.2's map M_t of touched cells (0 free or unknown, 1 occupied).
 //! Nothing here allocates after `new`; every input that is not finite is ignored.
 
 pub mod contact;

@@ -1,5 +1,5 @@
-//! The mapping process: builds the frontier grid (seed §5.2) from scans and the contact grid
-//! (seed §2) from touch, both placed with the estimated pose.
+//! The mapping process: builds the frontier grid (algorithms §5.2) from scans and the contact grid
+//! (algorithms §2) from touch, both placed with the estimated pose.
 //!
 //! world/map once, then localization/pose, sensing/scan and sensing/tactile every step →
 //! mapping/grid and mapping/contact.

@@ -540,7 +540,7 @@ impl Monitor {
 
     /// Keeps the planner's mode, bounce count, exploration-complete flag and path.
     pub fn on_plan_status(&mut self, s: &PlanStatus) {
-        // A local minimum the planner reported (seed §1 APF): count each entry into the mode.
+        // A local minimum the planner reported (algorithms §1 APF): count each entry into the mode.
         if s.mode == MODE_STALLED && self.plan_mode != MODE_STALLED {
             self.stalls += 1;
         }
@@ -648,7 +648,7 @@ impl Monitor {
             .collect()
     }
 
-    /// The summary of DESIGN.md "Interfaces" plus NEES, estimator update time, bounces, grid
+    /// The fields README.md lists for summary.json plus NEES, estimator update time, bounces, grid
     /// hashes and the reachable free cells; `meta` supplies what the monitor cannot see.
     pub fn summary(&self, meta: &RunMeta) -> Summary {
         let finite = |v: f64| if v.is_finite() { v } else { 0.0 };

@@ -1,5 +1,5 @@
-//! summary.json: the run's outcome in one file (DESIGN.md, "Interfaces that users and tests
-//! rely on"), with a fixed field order so two runs diff cleanly.
+//! summary.json: the run's outcome in one file (the fields README.md lists, which users and
+//! tests rely on), with a fixed field order so two runs diff cleanly.
 
 use crate::MonitorError;
 use serde::{Deserialize, Serialize};

@@ -1,4 +1,4 @@
-//! Artificial potential field (seed §1), in the seed's form and corrected (DESIGN.md errata).
+//! Artificial potential field (algorithms §1), in the seed's form and corrected (docs/errata.md).
 //!
 //! Seed form ([`ApfForm::Seed`]): φ_goal = c·|p − p_goal| (§1.2), the boundary potential
 //! φ_b = 1/(δ + Σ(g_i + |g_i|)) (§1.3), the square-obstacle potential φ_k = φ_max/(1 + h) with
@@ -25,27 +25,27 @@ use mole_types::{
 /// Which APF formulas to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ApfForm {
-    /// Seed §1 as written (atan, '+1' in h, 1/(δ+Σ(g+|g|)) boundary).
+    /// Algorithms §1 as written (atan, '+1' in h, 1/(δ+Σ(g+|g|)) boundary).
     Seed,
-    /// DESIGN.md errata: atan2, guarded attraction, FIRAS barriers per wall and obstacle.
+    /// docs/errata.md: atan2, guarded attraction, FIRAS barriers per wall and obstacle.
     #[default]
     Corrected,
 }
 
-/// Seed §1.2: φ_goal(x, y) = c·√((x − x_goal)² + (y − y_goal)²).
+/// Algorithms §1.2: φ_goal(x, y) = c·√((x − x_goal)² + (y − y_goal)²).
 pub fn phi_goal(p: [f64; 2], goal: [f64; 2], c: f64) -> f64 {
     c * (p[0] - goal[0]).hypot(p[1] - goal[1])
 }
 
-/// Seed §1.2: F_goal = −c/|p − p_goal| · (p − p_goal), as written: NaN at the goal.
+/// Algorithms §1.2: F_goal = −c/|p − p_goal| · (p − p_goal), as written: NaN at the goal.
 pub fn f_goal_seed(p: [f64; 2], goal: [f64; 2], c: f64) -> [f64; 2] {
     let (dx, dy) = (p[0] - goal[0], p[1] - goal[1]);
     let d = dx.hypot(dy);
     [-c / d * dx, -c / d * dy]
 }
 
-/// Seed §1.2's F_goal guarded at the goal: 0 within `eps` of it (the conic force is undefined
-/// there, DESIGN.md errata).
+/// Algorithms §1.2's F_goal guarded at the goal: 0 within `eps` of it (the conic force is undefined
+/// there, docs/errata.md).
 pub fn f_goal(p: [f64; 2], goal: [f64; 2], c: f64, eps: f64) -> [f64; 2] {
     let (dx, dy) = (p[0] - goal[0], p[1] - goal[1]);
     let d = dx.hypot(dy);
@@ -55,7 +55,7 @@ pub fn f_goal(p: [f64; 2], goal: [f64; 2], c: f64, eps: f64) -> [f64; 2] {
     [-c / d * dx, -c / d * dy]
 }
 
-/// Seed §1.3: the boundary lines g_i of the arena `[x0, x1] × [y0, y1]`, each ≤ 0 inside
+/// Algorithms §1.3: the boundary lines g_i of the arena `[x0, x1] × [y0, y1]`, each ≤ 0 inside
 /// (the seed leaves the sign open; this one makes g + |g| vanish inside).
 pub fn boundary_g(p: [f64; 2], arena: [f64; 4]) -> [f64; 4] {
     [
@@ -66,13 +66,13 @@ pub fn boundary_g(p: [f64; 2], arena: [f64; 4]) -> [f64; 4] {
     ]
 }
 
-/// Seed §1.3: φ_b = 1/(δ + Σ_i (g_i + |g_i|)): the constant 1/δ everywhere inside the arena.
+/// Algorithms §1.3: φ_b = 1/(δ + Σ_i (g_i + |g_i|)): the constant 1/δ everywhere inside the arena.
 pub fn phi_b_seed(p: [f64; 2], arena: [f64; 4], delta: f64) -> f64 {
     let s: f64 = boundary_g(p, arena).iter().map(|g| g + g.abs()).sum();
     1.0 / (delta + s)
 }
 
-/// Seed §1.3's h(x, y) for the square `k`, with the '+1' as written (an integer-cell
+/// Algorithms §1.3's h(x, y) for the square `k`, with the '+1' as written (an integer-cell
 /// convention that shrinks the square by one unit); 0 anywhere inside the square.
 pub fn h_seed(p: [f64; 2], k: &Square) -> f64 {
     let (x, y) = (p[0], p[1]);
@@ -81,12 +81,12 @@ pub fn h_seed(p: [f64; 2], k: &Square) -> f64 {
     t(k.cx - l2 - x) + t(k.cy - l2 - y) + t(x + 1.0 - k.cx - l2) + t(y + 1.0 - k.cy - l2)
 }
 
-/// Seed §1.3: φ_k = φ_max/(1 + h(x, y)).
+/// Algorithms §1.3: φ_k = φ_max/(1 + h(x, y)).
 pub fn phi_k_seed(p: [f64; 2], k: &Square, phi_max: f64) -> f64 {
     phi_max / (1.0 + h_seed(p, k))
 }
 
-/// Seed §1.3: φ_obs = max_k φ_k (0 without obstacles).
+/// Algorithms §1.3: φ_obs = max_k φ_k (0 without obstacles).
 pub fn phi_obs_seed(p: [f64; 2], squares: &[Square], phi_max: f64) -> f64 {
     squares
         .iter()
@@ -102,12 +102,12 @@ pub fn numerical_gradient(f: impl Fn([f64; 2]) -> f64, p: [f64; 2], h: f64) -> [
     ]
 }
 
-/// Seed §1.4: θ = tan⁻¹(F_y/F_x) as written: only (−π/2, π/2], the quadrant is lost.
+/// Algorithms §1.4: θ = tan⁻¹(F_y/F_x) as written: only (−π/2, π/2], the quadrant is lost.
 pub fn heading_seed(f: [f64; 2]) -> f64 {
     (f[1] / f[0]).atan()
 }
 
-/// Seed §1.4's heading with atan2 (DESIGN.md errata).
+/// Algorithms §1.4's heading with atan2 (docs/errata.md).
 pub fn heading(f: [f64; 2]) -> f64 {
     f[1].atan2(f[0])
 }
@@ -204,7 +204,7 @@ pub enum ApfPhase {
     Reached,
 }
 
-/// The APF planner (seed §1) with stall/oscillation detection and random-walk escape.
+/// The APF planner (algorithms §1) with stall/oscillation detection and random-walk escape.
 #[derive(Debug, Clone)]
 pub struct Apf {
     limits: RobotLimits,
@@ -282,7 +282,7 @@ impl Apf {
         &self.field
     }
 
-    /// F_net at `p` (seed §1.4) in the configured form, with the nearest scan hit `scan_hit`
+    /// F_net at `p` (algorithms §1.4) in the configured form, with the nearest scan hit `scan_hit`
     /// (world point) as an extra obstacle. Allocation-free; O(1) with the distance field.
     pub fn force(&self, p: [f64; 2], scan_hit: Option<[f64; 2]>) -> [f64; 2] {
         let cfg = &self.config;
@@ -340,7 +340,7 @@ impl Apf {
         }
     }
 
-    /// The heading of F_net in the configured form (seed §1.4).
+    /// The heading of F_net in the configured form (algorithms §1.4).
     pub fn heading_of(&self, f: [f64; 2]) -> f64 {
         match self.config.form {
             ApfForm::Seed => heading_seed(f),

@@ -1,4 +1,4 @@
-//! Reactive bounce-back (seed §4.1) with DESIGN.md's errata, as a layer around any [`Planner`].
+//! Reactive bounce-back (algorithms §4.1) with docs/errata.md, as a layer around any [`Planner`].
 //!
 //! Trigger: d_obs < d_th, d_obs being the nearest scan range minus the robot radius in the
 //! direction of travel, or any tactile sensor above its force threshold. Then reverse,
@@ -12,7 +12,7 @@ use crate::{Command, Planner, PlannerInput, RobotLimits, stop_command, usable};
 use core::f64::consts::{FRAC_PI_2, FRAC_PI_3, PI};
 use mole_types::{MODE_BOUNCE_BACK, wrap_angle};
 
-/// Seed §4.1: the bounced velocity (v_x, v_y)(t+1) = −α·(v_x, v_y)(t), α ∈ (0, 1].
+/// Algorithms §4.1: the bounced velocity (v_x, v_y)(t+1) = −α·(v_x, v_y)(t), α ∈ (0, 1].
 pub fn bounce_back_velocity(v: [f64; 2], alpha: f64) -> [f64; 2] {
     [-alpha * v[0], -alpha * v[1]]
 }
@@ -20,14 +20,14 @@ pub fn bounce_back_velocity(v: [f64; 2], alpha: f64) -> [f64; 2] {
 /// Which position update [`bounce_back_position`] uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PositionUpdate {
-    /// The seed's (x, y)(t+1) = −α·(v_x, v_y)(t)·Δt, which drops x(t) (DESIGN.md errata).
+    /// The seed's (x, y)(t+1) = −α·(v_x, v_y)(t)·Δt, which drops x(t) (docs/errata.md).
     Seed,
     /// (x, y)(t+1) = (x, y)(t) − α·(v_x, v_y)(t)·Δt.
     #[default]
     Corrected,
 }
 
-/// Seed §4.1's position update after a bounce-back, in the seed's form or the corrected one.
+/// Algorithms §4.1's position update after a bounce-back, in the seed's form or the corrected one.
 pub fn bounce_back_position(
     x: [f64; 2],
     v: [f64; 2],
@@ -154,7 +154,7 @@ pub enum Phase {
     Disarmed { since: u64 },
 }
 
-/// Seed §4 reactive bounce-back around a wrapped planner `P`.
+/// Algorithms §4 reactive bounce-back around a wrapped planner `P`.
 #[derive(Debug, Clone)]
 pub struct BounceBack<P: Planner> {
     inner: P,

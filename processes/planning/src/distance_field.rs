@@ -1,5 +1,5 @@
-//! A Euclidean distance field over the occupied cells of the frontier grid (seed §5.2 code 2),
-//! each cell a square of side = resolution (seed §1.3's square obstacles).
+//! A Euclidean distance field over the occupied cells of the frontier grid (algorithms §5.2 code 2),
+//! each cell a square of side = resolution (algorithms §1.3's square obstacles).
 //!
 //! Exact feature transform by Felzenszwalb & Huttenlocher, "Distance Transforms of Sampled
 //! Functions" (2012): a 1-D pass down every column, then the lower envelope of parabolas along

@@ -1,4 +1,4 @@
-//! Dynamic window approach (seed §4.2; Fox, Burgard & Thrun, "The dynamic window approach to
+//! Dynamic window approach (algorithms §4.2; Fox, Burgard & Thrun, "The dynamic window approach to
 //! collision avoidance", IEEE RAM 1997) with Nav2-DWB-style critics.
 //!
 //! The window: speeds reachable within `window_dt` from the current (v, ω) under the
@@ -57,7 +57,7 @@ pub enum DwaCost {
     /// Weighted critics over a multi-step rollout (the default).
     #[default]
     Critics,
-    /// Seed §4.2 as written: one step of T_H, J = −d_goal + Σ(1/d_i)² + |Δv| + |Δω|.
+    /// Algorithms §4.2 as written: one step of T_H, J = −d_goal + Σ(1/d_i)² + |Δv| + |Δω|.
     Seed,
     /// PythonRobotics: 0.15·|heading error to the goal| + 1.0·(v_max − v) + 1.0/min clearance,
     /// infinite on contact (gains from [`Critics`]: `heading`, `velocity`, `obstacle`).
@@ -168,7 +168,7 @@ pub struct DwaState {
     pub omega: f64,
 }
 
-/// Seed §4.2 / Fox et al.: the dynamic window [v_lo, v_hi, ω_lo, ω_hi] = the speed limits
+/// Algorithms §4.2 / Fox et al.: the dynamic window [v_lo, v_hi, ω_lo, ω_hi] = the speed limits
 /// ∩ the speeds reachable within `dt` under the acceleration limits.
 pub fn dynamic_window(state: &DwaState, limits: &RobotLimits, min_speed: f64, dt: f64) -> [f64; 4] {
     [

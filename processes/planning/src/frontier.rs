@@ -1,4 +1,4 @@
-//! Frontier exploration (seed §5; Yamauchi, "A frontier-based approach for autonomous
+//! Frontier exploration (algorithms §5; Yamauchi, "A frontier-based approach for autonomous
 //! exploration", CIRA 1997).
 //!
 //! F = free cells with an unexplored 4-neighbour (§5.2), grouped into 8-connected clusters of at
@@ -82,14 +82,14 @@ pub struct Frontier {
     pub cost: f64,
 }
 
-/// Seed §5.3: C(f) = −α·I/I_max + β·L/L_max.
+/// Algorithms §5.3: C(f) = −α·I/I_max + β·L/L_max.
 pub fn frontier_cost(gain: f64, length: f64, i_max: f64, l_max: f64, alpha: f64, beta: f64) -> f64 {
     let i = if i_max > 0.0 { gain / i_max } else { 0.0 };
     let l = if l_max > 0.0 { length / l_max } else { 0.0 };
     -alpha * i + beta * l
 }
 
-/// Seed §5.2: whether cell `i` of a `w`-wide 0/1/2 grid is a frontier cell (free, with an
+/// Algorithms §5.2: whether cell `i` of a `w`-wide 0/1/2 grid is a frontier cell (free, with an
 /// unexplored 4-neighbour).
 #[inline]
 pub fn is_frontier_cell(cells: &[u8], w: usize, h: usize, i: usize) -> bool {
@@ -358,7 +358,7 @@ impl FrontierSelector {
     }
 }
 
-/// The frontier planner (seed §5) with a local planner following the path.
+/// The frontier planner (algorithms §5) with a local planner following the path.
 #[derive(Debug, Clone)]
 pub struct FrontierExplorer {
     limits: RobotLimits,

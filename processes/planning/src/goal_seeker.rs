@@ -1,4 +1,4 @@
-//! Goal seeking with a configurable re-planner after a bounce-back (seed §4: "path
+//! Goal seeking with a configurable re-planner after a bounce-back (algorithms §4: "path
 //! re-planning" after the reactive layer's bounce, by APF or DWA).
 //!
 //! [`GoalSeeker`] drives toward the goal with its primary local planner; when the bounce-back

@@ -1,9 +1,9 @@
-//! Planning: APF, DWA, random walk, bounce-back, frontier selection (seed §1, §3-§5).
+//! Planning: APF, DWA, random walk, bounce-back, frontier selection (algorithms §1, §3-§5).
 //!
 //! Every planner implements [`Planner`]: the process main fills a [`PlannerInput`] from the
 //! newest pose, scan, tactile forces and frontier grid, calls [`Planner::step`] once per
 //! simulation step and writes the returned [`Command`] into the loaned `planning/cmd` sample.
-//! The reactive layer [`bounce_back::BounceBack`] wraps any planner (seed §4: react at once, then
+//! The reactive layer [`bounce_back::BounceBack`] wraps any planner (algorithms §4: react at once, then
 //! hand back and re-plan). [`planner_by_name`] builds the configured stack.
 //!
 //! Every command a planner returns is finite, within the speed limits and within the
@@ -182,7 +182,7 @@ pub trait Planner {
     /// The command for this step; finite, within the speed limits, and within the acceleration
     /// limits relative to the previous command.
     fn step(&mut self, input: &PlannerInput) -> Command;
-    /// Drop the current plan and choose a new one at the next step (seed §4 "path re-planning",
+    /// Drop the current plan and choose a new one at the next step (algorithms §4 "path re-planning",
     /// asked for by the reactive layer after a bounce-back).
     fn replan(&mut self) {}
     /// An obstacle was met at world heading `heading` (rad) from world point `at`: the reactive
@@ -261,13 +261,13 @@ pub(crate) fn stop_command(limits: &RobotLimits, prev: &Command, dt: f64) -> Com
 }
 
 /// Which local planner drives the goal-seeking planners (the frontier follower, and the
-/// re-planning after a bounce-back, seed §4 "path re-planning: APF or DWA").
+/// re-planning after a bounce-back, algorithms §4 "path re-planning: APF or DWA").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LocalPlanner {
-    /// Dynamic window approach (seed §4.2).
+    /// Dynamic window approach (algorithms §4.2).
     #[default]
     Dwa,
-    /// Artificial potential field (seed §1).
+    /// Artificial potential field (algorithms §1).
     Apf,
 }
 
@@ -292,7 +292,7 @@ pub struct PlannerConfig {
     pub frontier: FrontierConfig,
     /// Random-walk settings.
     pub random_walk: RandomWalkConfig,
-    /// Which local planner re-plans after a bounce-back for `apf` and `dwa` (seed §4 "path
+    /// Which local planner re-plans after a bounce-back for `apf` and `dwa` (algorithms §4 "path
     /// re-planning: APF or DWA"); `None` = the planner itself (the default).
     pub replan_with: Option<LocalPlanner>,
     /// How long (s) `replan_with` drives after a bounce before handing back.
@@ -327,7 +327,7 @@ impl PlannerConfig {
     }
 }
 
-/// Builds the configured planner inside the bounce-back layer (seed §4): `random-walk` (§3),
+/// Builds the configured planner inside the bounce-back layer (algorithms §4): `random-walk` (§3),
 /// `apf` (§1) and `dwa` (§4.2) toward `config.goal` (an error naming `--goal X,Y` without one),
 /// `frontier` (§5) with `config.local` following the path.
 pub fn build_planner(

@@ -13,7 +13,10 @@ use mole_types::{Pose2, topics};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
-#[command(name = "mole-planning", about = "mole's planners (seed §1, §3-§5)")]
+#[command(
+    name = "mole-planning",
+    about = "mole's planners (algorithms §1, §3-§5)"
+)]
 struct Args {
     #[command(flatten)]
     common: CommonArgs,

@@ -1,6 +1,6 @@
-//! What the planners read from the sensors: the obstacle distance d_obs of seed §4 from a scan,
+//! What the planners read from the sensors: the obstacle distance d_obs of algorithms §4 from a scan,
 //! contact from the tactile forces, the freest direction, and free-space checks against a scan
-//! or the frontier grid (seed §5.2 cell codes). Pure functions; none allocates.
+//! or the frontier grid (algorithms §5.2 cell codes). Pure functions; none allocates.
 //!
 //! Bad values in a message (a non-finite or negative range, a non-finite angle or force, a grid
 //! with a bad resolution) are skipped, never trusted: a skipped beam sees nothing.
@@ -32,7 +32,7 @@ pub struct Nearest {
     pub angle: f64,
 }
 
-/// Seed §4: d_obs = min over the beams within `half_angle` of `direction` (robot frame) of
+/// Algorithms §4: d_obs = min over the beams within `half_angle` of `direction` (robot frame) of
 /// range − radius; `None` when no beam is in the sector. `half_angle ≥ π` takes every beam,
 /// the seed's form; a sector around the direction of travel keeps walls beside or behind the
 /// robot, which it is not moving toward, from triggering.
@@ -64,7 +64,7 @@ pub fn nearest_obstacle(
 }
 
 /// The net force (robot frame, N) of the tactile sensors whose |f| exceeds `threshold`, or
-/// `None` when no sensor does (seed §4: touch is the trigger of last resort).
+/// `None` when no sensor does (algorithms §4: touch is the trigger of last resort).
 pub fn contact_force(tactile: &Tactile, threshold: f64) -> Option<[f64; 2]> {
     let mut net: Option<[f64; 2]> = None;
     for s in tactile.sensors() {

@@ -1,4 +1,4 @@
-//! Random walk (seed §3): the 1-D walk and its moments (§3.2), the 8-direction grid walk with
+//! Random walk (algorithms §3): the 1-D walk and its moments (§3.2), the 8-direction grid walk with
 //! its coverage (§3.3), and [`RandomWalk`], the robot-level planner built on it.
 
 use crate::obstacles::{corridor_clear, segment_free};
@@ -20,7 +20,7 @@ fn check_probability(p: f64) -> Result<(), PlanningError> {
     }
 }
 
-/// Seed §3.2: x_k = x_0 + Σ_{t=1..k} ξ_t with ξ_t = +1 with probability p, −1 with q = 1 − p.
+/// Algorithms §3.2: x_k = x_0 + Σ_{t=1..k} ξ_t with ξ_t = +1 with probability p, −1 with q = 1 − p.
 pub fn walk_1d<R: Rng + ?Sized>(
     rng: &mut R,
     x0: i64,
@@ -39,21 +39,21 @@ pub fn walk_1d<R: Rng + ?Sized>(
     Ok(x)
 }
 
-/// Seed §3.2: E(x_k − x_0) = k(p − q).
+/// Algorithms §3.2: E(x_k − x_0) = k(p − q).
 pub fn mean_1d(k: u64, p: f64) -> f64 {
     k as f64 * (p - (1.0 - p))
 }
 
-/// Seed §3.2: Var(x_k) = 4kpq.
+/// Algorithms §3.2: Var(x_k) = 4kpq.
 pub fn variance_1d(k: u64, p: f64) -> f64 {
     4.0 * k as f64 * p * (1.0 - p)
 }
 
-/// The diagonal stride of the 2-D walk for an orthogonal stride of r cells (seed §3.3).
+/// The diagonal stride of the 2-D walk for an orthogonal stride of r cells (algorithms §3.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum DiagonalStride {
     /// The seed's ⌊r/√2⌋ cells per axis: 0 for r = 1, so every diagonal move stands still
-    /// (DESIGN.md errata).
+    /// (docs/errata.md).
     Seed,
     /// max(1, round(r/√2)) cells per axis: the nearest stride of Euclidean length ≈ r that moves.
     #[default]
@@ -83,7 +83,7 @@ const DIRECTIONS: [(i64, i64); 8] = [
     (1, -1),
 ];
 
-/// Parameters of a grid-level 2-D walk (seed §3.3).
+/// Parameters of a grid-level 2-D walk (algorithms §3.3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Walk2d {
     /// Grid width m (cells).
@@ -111,7 +111,7 @@ pub struct WalkReport {
     pub stood_still: u64,
     /// Distinct cells the walker has been on (start, every cell it passed, every end point).
     pub covered_cells: usize,
-    /// `covered_cells` as a percentage of m × n (seed §3.3's "total area covered").
+    /// `covered_cells` as a percentage of m × n (algorithms §3.3's "total area covered").
     pub coverage_percent: f64,
     /// Where the walk ended (column, row).
     pub final_cell: (usize, usize),
@@ -120,7 +120,7 @@ pub struct WalkReport {
 /// Largest grid [`walk_2d`] accepts (cells), to bound its one allocation.
 pub const MAX_WALK_CELLS: usize = 1 << 26;
 
-/// Seed §3.3: a walk on an m × n grid choosing one of the 8 directions uniformly at random each
+/// Algorithms §3.3: a walk on an m × n grid choosing one of the 8 directions uniformly at random each
 /// step, r cells orthogonally and [`DiagonalStride::cells`] diagonally, reporting the area
 /// covered. Only moves that stay on the grid are drawn (the seed leaves the border open).
 pub fn walk_2d<R: Rng + ?Sized>(rng: &mut R, walk: &Walk2d) -> Result<WalkReport, PlanningError> {
@@ -203,7 +203,7 @@ pub fn walk_2d<R: Rng + ?Sized>(rng: &mut R, walk: &Walk2d) -> Result<WalkReport
 /// Settings of the robot-level [`RandomWalk`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RandomWalkConfig {
-    /// Distance to each waypoint (m), in all 8 directions: in metres the seed §3.3 diagonal
+    /// Distance to each waypoint (m), in all 8 directions: in metres the algorithms §3.3 diagonal
     /// stride needs no rounding (r/√2 per axis).
     pub stride: f64,
     /// A waypoint closer than this counts as reached (m).
@@ -218,7 +218,7 @@ pub struct RandomWalkConfig {
     pub turn_enter: f64,
     /// ...until it falls below this (rad); then drive.
     pub turn_exit: f64,
-    /// Seed §3.1's adaptive walk: with a grid, draw only directions whose segment (extended by
+    /// Algorithms §3.1's adaptive walk: with a grid, draw only directions whose segment (extended by
     /// the robot radius) is free or unexplored, never occupied.
     pub adaptive: bool,
     /// With a scan, also skip directions whose corridor (robot width) holds a scan hit.
@@ -283,7 +283,7 @@ impl RandomWalkConfig {
     }
 }
 
-/// The robot-level random walk (seed §3.3 on the robot): draw one of 8 world directions (seeded
+/// The robot-level random walk (algorithms §3.3 on the robot): draw one of 8 world directions (seeded
 /// ChaCha8), drive to the waypoint one stride away — turn in place toward it, then drive with a
 /// proportional heading controller — and draw the next when it is reached or after a timeout.
 #[derive(Debug, Clone)]

@@ -3,7 +3,7 @@
 use core::fmt;
 use core::str::FromStr;
 
-/// How the stack keeps time (DESIGN.md, "Clock modes").
+/// How the stack keeps time (docs/architecture.md, "Clock modes").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ClockMode {
     /// The world steps at a fixed rate; every process reacts to its newest input.

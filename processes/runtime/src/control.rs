@@ -1,5 +1,5 @@
 //! `stack/control`: the launcher serves it, `mole swap` / `mole stop` / `mole status` call it.
-//! An iceoryx2 request-response service, like every other link of the stack (DESIGN.md).
+//! An iceoryx2 request-response service, like every other link of the stack (docs/architecture.md).
 
 use crate::node::{Context, RuntimeError, now_ns};
 use iceoryx2::active_request::ActiveRequest;

@@ -1,5 +1,5 @@
 //! Tactile geometry: where the k rim sensors sit and how a contact is shared between them
-//! (the k force vectors of seed §2.2's f_net).
+//! (the k force vectors of algorithms §2.2's f_net).
 
 use core::f64::consts::TAU;
 

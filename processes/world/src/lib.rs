@@ -3,7 +3,7 @@
 //! - [`scenario`]: the scenario file format (TOML), its defaults, validation and located errors,
 //!   and [`Scenario::write_world_map`] which fills the `world/map` message in place.
 //! - [`rosmap`]: ROS map_server maps (YAML + PGM) that a scenario may load as obstacles.
-//! - [`World`]: one disk robot with unicycle kinematics in the arena of seed §1.3 (a rectangle
+//! - [`World`]: one disk robot with unicycle kinematics in the arena of algorithms §1.3 (a rectangle
 //!   with axis-aligned squares); `step` applies a command, resolves contacts and records them.
 //! - [`FreeSpace`]: the robot's free configuration space on a raster, flood-filled from the start
 //!   (which scenario regions the robot can reach at all).

@@ -167,7 +167,7 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
         } else if stop_at_goal && world.goal_reached() {
             END_GOAL_REACHED
         } else if exploration_complete {
-            // The planner found no reachable frontier left (seed §5): the run is done.
+            // The planner found no reachable frontier left (algorithms §5): the run is done.
             END_EXPLORATION_COMPLETE
         } else {
             0

@@ -1,4 +1,4 @@
-//! Scenario files: the arena of seed §1.3 (a rectangle `[0, W] × [0, H]` with axis-aligned
+//! Scenario files: the arena of algorithms §1.3 (a rectangle `[0, W] × [0, H]` with axis-aligned
 //! square obstacles), the robot, its sensors and their noise, the seed and an optional goal.
 //!
 //! A scenario is a TOML file; every section is optional and falls back to the defaults below, so
