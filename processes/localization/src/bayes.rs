@@ -1,4 +1,4 @@
-//! The histogram (grid) Bayes filter (seed §6.3): the belief Bel(x) over cells of the arena ×
+//! The histogram (grid) Bayes filter (algorithms §6.3): the belief Bel(x) over cells of the arena ×
 //! heading bins, predicted by the motion model and corrected by the measurement likelihood,
 //! Bel(x_t) = η p(z_t | x_t) Bel̄(x_t).
 //!
@@ -12,7 +12,7 @@
 //! Gaussian kernel). The likelihood is evaluated at cell centres with the measurement σ inflated
 //! by the in-cell spread (deviation from the seed's exact p(z | x): a cell is not a point).
 
-use crate::models::{BeaconTable, sinc, wrap_near};
+use crate::models::{BeaconTable, odometry_is_plausible, sinc, wrap_near};
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
 use core::f64::consts::{PI, TAU};
@@ -64,7 +64,7 @@ impl Default for BayesConfig {
 /// Per-slice sums of the belief for the summary: Σp, Σp·x, Σp·y, Σp·x², Σp·y², Σp·x·y.
 type Moments = [f64; 6];
 
-/// The grid belief Bel(x) over (x, y, θ) and its two buffers (seed §6.3).
+/// The grid belief Bel(x) over (x, y, θ) and its two buffers (algorithms §6.3).
 #[derive(Debug, Clone)]
 pub struct HistogramFilter {
     nx: usize,
@@ -300,12 +300,14 @@ impl HistogramFilter {
         }
     }
 
-    /// Prediction (seed §6.3), Bel̄(x_t) = Σ p(x_t | x_{t−1}, u_t) Bel(x_{t−1}): each slice moves
+    /// Prediction (algorithms §6.3), Bel̄(x_t) = Σ p(x_t | x_{t−1}, u_t) Bel(x_{t−1}): each slice moves
     /// by the unicycle chord of its own heading (Thrun §5.3), then the motion noise blurs x, y
     /// (per slice, σ_v² along the heading) and θ (σ_ω²), and η renormalises (mass pushed off the
     /// arena is dropped).
+    ///
+    /// Odometry that is not plausible ([`odometry_is_plausible`]) is ignored and counted.
     pub fn predict_with(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), ReadingError> {
-        if !(v.is_finite() && omega.is_finite() && dt.is_finite() && dt >= 0.0) {
+        if !odometry_is_plausible(v, omega, dt) {
             self.ignored += 1;
             return Err(ReadingError::Invalid);
         }
@@ -421,7 +423,7 @@ impl HistogramFilter {
         Ok(())
     }
 
-    /// Correction (seed §6.3), Bel(x_t) = η p(z_t | x_t) Bel̄(x_t), with the beacon readings
+    /// Correction (algorithms §6.3), Bel(x_t) = η p(z_t | x_t) Bel̄(x_t), with the beacon readings
     /// (range and bearing, bearing error wrapped) and the fix as independent Gaussians; σ are
     /// inflated by the in-cell spread (cell²/6 on ranges and positions, bin²/12 and
     /// (cell/d)²/6 on bearings). Returns how many readings were used.

@@ -1,4 +1,4 @@
-//! The extended Kalman filter (seed §6.6) on the state x = (x, y, θ), with unicycle motion from
+//! The extended Kalman filter (algorithms §6.6) on the state x = (x, y, θ), with unicycle motion from
 //! odometry and range-bearing corrections to known beacons plus an optional position fix.
 //!
 //! The seed (after Thrun) calls the PROCESS noise covariance R_t and the MEASUREMENT noise
@@ -7,8 +7,8 @@
 
 use crate::kalman::{CHI2_999_2DOF, KalmanError, kalman_correct, symmetrize};
 use crate::models::{
-    BeaconTable, MIN_RANGE, range_bearing_h, range_bearing_jacobian_h, unicycle_g,
-    unicycle_jacobian_g, unicycle_jacobian_v,
+    BeaconTable, MIN_RANGE, odometry_is_plausible, range_bearing_h, range_bearing_jacobian_h,
+    unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v,
 };
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
@@ -28,7 +28,7 @@ pub const REACQUIRE_OUTLIER_RATE: f64 = 0.5;
 /// Largest factor one re-acquisition inflates Σ by.
 const MAX_INFLATION: f64 = 1e6;
 
-/// The EKF belief N(μ, Σ) over (x, y, θ) and what it needs to update it (seed §6.6).
+/// The EKF belief N(μ, Σ) over (x, y, θ) and what it needs to update it (algorithms §6.6).
 #[derive(Debug, Clone)]
 pub struct Ekf {
     /// μ = (x, y, θ), θ wrapped to (−π, π].
@@ -94,12 +94,12 @@ impl Ekf {
         )
     }
 
-    /// g(μ, u): unicycle motion (exact arc; straight-line limit when |ω| small), seed §6.6.
+    /// g(μ, u): unicycle motion (exact arc; straight-line limit when |ω| small), algorithms §6.6.
     pub fn g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Vector3<f64> {
         unicycle_g(mu, v, omega, dt)
     }
 
-    /// G_t = ∂g/∂x, analytic (seed §6.6); with V_t ([`Ekf::jacobian_v`]) it gives the process
+    /// G_t = ∂g/∂x, analytic (algorithms §6.6); with V_t ([`Ekf::jacobian_v`]) it gives the process
     /// noise R_t = V_t M_t V_tᵀ. The seed (after Thrun) calls process noise R, measurement noise Q.
     pub fn jacobian_g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Matrix3<f64> {
         unicycle_jacobian_g(mu, v, omega, dt)
@@ -116,7 +116,7 @@ impl Ekf {
         range_bearing_h(x, beacon)
     }
 
-    /// H_t = ∂h/∂x, analytic (seed §6.6).
+    /// H_t = ∂h/∂x, analytic (algorithms §6.6).
     pub fn jacobian_h(x: &Vector3<f64>, beacon: (f64, f64)) -> Matrix2x3<f64> {
         range_bearing_jacobian_h(x, beacon)
     }
@@ -136,10 +136,11 @@ impl Ekf {
         self.reacquisitions
     }
 
-    /// Prediction (seed §6.6): μ̄ = g(μ, u), Σ̄ = G_t Σ G_tᵀ + R_t with R_t = V_t M_t V_tᵀ + floor.
-    /// A non-finite control or a negative dt is ignored (and counted); dt = 0 changes nothing.
+    /// Prediction (algorithms §6.6): μ̄ = g(μ, u), Σ̄ = G_t Σ G_tᵀ + R_t with R_t = V_t M_t V_tᵀ + floor.
+    /// Odometry that is not plausible ([`odometry_is_plausible`]: non-finite, negative dt, or
+    /// beyond the bounds of [`crate::models`]) is ignored (and counted); dt = 0 changes nothing.
     pub fn predict_with(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), ReadingError> {
-        if !(v.is_finite() && omega.is_finite() && dt.is_finite() && dt >= 0.0) {
+        if !odometry_is_plausible(v, omega, dt) {
             self.ignored += 1;
             return Err(ReadingError::Invalid);
         }
@@ -155,7 +156,7 @@ impl Ekf {
         Ok(())
     }
 
-    /// Correction with one range-bearing reading (seed §6.6): ν = z − h(μ̄) with the bearing
+    /// Correction with one range-bearing reading (algorithms §6.6): ν = z − h(μ̄) with the bearing
     /// wrapped, gated, Joseph-form update. Returns νᵀ S⁻¹ ν; refusals are counted.
     pub fn correct_beacon(&mut self, reading: &BeaconReading) -> Result<f64, ReadingError> {
         let result = self.try_correct_beacon(reading);

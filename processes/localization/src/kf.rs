@@ -1,4 +1,4 @@
-//! The linear Kalman filter (seed §6.5): a generic [`KalmanFilter`] over N states, M measurement
+//! The linear Kalman filter (algorithms §6.5): a generic [`KalmanFilter`] over N states, M measurement
 //! components and U controls, and the [`Kf`] estimator that runs it on the robot.
 //!
 //! Noise naming follows the seed and Thrun: R is the PROCESS noise covariance, Q the
@@ -12,6 +12,7 @@
 //! position fix is its one measurement, C = [I 0].
 
 use crate::kalman::{KalmanError, kalman_correct, symmetrize};
+use crate::models::odometry_is_plausible;
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
 use mole_types::{Beacons, ESTIMATOR_KF, Fix, Odom, Pose2, WorldMap, wrap_angle};
@@ -27,7 +28,7 @@ pub const INITIAL_STD_THETA: f64 = 0.05;
 pub const MAX_HEADING_VAR: f64 = core::f64::consts::PI * core::f64::consts::PI / 3.0;
 
 /// The linear-Gaussian belief N(μ, Σ) and its model x_t = A x_{t−1} + B u_t + ε (ε ~ N(0, R)),
-/// z_t = C x_t + δ (δ ~ N(0, Q)), seed §6.5. Every matrix is a stack-allocated nalgebra
+/// z_t = C x_t + δ (δ ~ N(0, Q)), algorithms §6.5. Every matrix is a stack-allocated nalgebra
 /// `SMatrix`: predict and correct never allocate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct KalmanFilter<const N: usize, const M: usize, const U: usize> {
@@ -48,7 +49,7 @@ pub struct KalmanFilter<const N: usize, const M: usize, const U: usize> {
 }
 
 impl<const N: usize, const M: usize, const U: usize> KalmanFilter<N, M, U> {
-    /// A filter with belief N(μ, Σ) and model (A, B, C, R, Q), seed §6.5.
+    /// A filter with belief N(μ, Σ) and model (A, B, C, R, Q), algorithms §6.5.
     pub fn new(
         mu: SVector<f64, N>,
         sigma: SMatrix<f64, N, N>,
@@ -69,7 +70,7 @@ impl<const N: usize, const M: usize, const U: usize> KalmanFilter<N, M, U> {
         }
     }
 
-    /// Prediction (seed §6.5, Algorithm 1): μ̄ = A μ + B u, Σ̄ = A Σ Aᵀ + R. A non-finite
+    /// Prediction (algorithms §6.5, Algorithm 1): μ̄ = A μ + B u, Σ̄ = A Σ Aᵀ + R. A non-finite
     /// control leaves the belief alone.
     pub fn predict(&mut self, u: &SVector<f64, U>) -> Result<(), KalmanError> {
         if !u.iter().all(|v| v.is_finite()) {
@@ -81,7 +82,7 @@ impl<const N: usize, const M: usize, const U: usize> KalmanFilter<N, M, U> {
         Ok(())
     }
 
-    /// Correction (seed §6.5, Algorithm 1): K = Σ̄ Cᵀ (C Σ̄ Cᵀ + Q)⁻¹, μ = μ̄ + K (z − C μ̄), and
+    /// Correction (algorithms §6.5, Algorithm 1): K = Σ̄ Cᵀ (C Σ̄ Cᵀ + Q)⁻¹, μ = μ̄ + K (z − C μ̄), and
     /// Σ in Joseph form (see [`kalman_correct`]). Returns νᵀ S⁻¹ ν; an optional χ² gate refuses
     /// outliers.
     pub fn correct(&mut self, z: &SVector<f64, M>, gate: Option<f64>) -> Result<f64, KalmanError> {
@@ -98,7 +99,7 @@ impl<const N: usize, const M: usize, const U: usize> KalmanFilter<N, M, U> {
     }
 }
 
-/// The linear KF estimator (seed §6.5) on the state (x, y, vx, vy), with the heading integrated
+/// The linear KF estimator (algorithms §6.5) on the state (x, y, vx, vy), with the heading integrated
 /// from ω on the side and the position fix as the measurement (beacons are ignored: nonlinear).
 #[derive(Debug, Clone)]
 pub struct Kf {
@@ -157,7 +158,7 @@ impl Kf {
         )
     }
 
-    /// Prediction with odometry (v, ω) over dt (seed §6.5): the control is the odometry velocity
+    /// Prediction with odometry (v, ω) over dt (algorithms §6.5): the control is the odometry velocity
     /// rotated into the world by the heading at mid-step, u = v·(cos θ̂, sin θ̂), and
     /// A = [[I, 0], [0, 0]], B = [[dt·I], [I]]: the velocity is held constant over the step at the
     /// control's value and the position integrates it.
@@ -166,8 +167,10 @@ impl Kf {
     /// odometry, the one measurement of the velocity we have, so the control sets it instead.
     /// R = B M_xy Bᵀ + floor, with M_xy the odometry noise rotated into the world: σ_v² along the
     /// heading and v²·σ_θ̂² across it (the heading's own uncertainty, treated as white).
+    ///
+    /// Odometry that is not plausible ([`odometry_is_plausible`]) is ignored and counted.
     pub fn predict_with(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), ReadingError> {
-        if !(v.is_finite() && omega.is_finite() && dt.is_finite() && dt >= 0.0) {
+        if !odometry_is_plausible(v, omega, dt) {
             self.ignored += 1;
             return Err(ReadingError::Invalid);
         }
@@ -200,7 +203,7 @@ impl Kf {
         Ok(())
     }
 
-    /// Correction with a position fix, z = C x + δ with C = [I 0] and Q = σ_fix²·I (seed §6.5),
+    /// Correction with a position fix, z = C x + δ with C = [I 0] and Q = σ_fix²·I (algorithms §6.5),
     /// when `fix.valid == 1`. Returns νᵀ S⁻¹ ν.
     pub fn correct_fix(&mut self, fix: &Fix) -> Result<Option<f64>, ReadingError> {
         match fix.valid {

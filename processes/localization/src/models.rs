@@ -1,7 +1,7 @@
 //! The motion and measurement models every estimator shares: the unicycle g(x, u) with its
 //! Jacobians, the range-bearing h(x) to a known beacon with its Jacobian, and the beacon table.
 //!
-//! Seed §6.6 writes x_t = g(x_{t-1}, u_t) + ε_t and z_t = h(x_t) + δ_t; the forms below are the
+//! Algorithms §6.6 writes x_t = g(x_{t-1}, u_t) + ε_t and z_t = h(x_t) + δ_t; the forms below are the
 //! velocity motion model and the range-bearing landmark model of Thrun et al., *Probabilistic
 //! Robotics*, §5.3 and §6.6.
 
@@ -63,7 +63,7 @@ fn chord(theta: f64, v: f64, omega: f64, dt: f64) -> (f64, f64, f64) {
     (v * dt * sinc(half), theta + half, half)
 }
 
-/// g(μ, u): the unicycle moved by (v, ω) for dt along the exact arc (seed §6.6, Thrun §5.3);
+/// g(μ, u): the unicycle moved by (v, ω) for dt along the exact arc (algorithms §6.6, Thrun §5.3);
 /// the straight-line limit as ω → 0 is built in. θ comes back wrapped to (−π, π].
 pub fn unicycle_g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Vector3<f64> {
     let (s, phi, _) = chord(mu[2], v, omega, dt);
@@ -74,7 +74,7 @@ pub fn unicycle_g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Vector3<f64
     )
 }
 
-/// G_t = ∂g/∂x at (μ, u), analytic (seed §6.6).
+/// G_t = ∂g/∂x at (μ, u), analytic (algorithms §6.6).
 pub fn unicycle_jacobian_g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Matrix3<f64> {
     let (s, phi, _) = chord(mu[2], v, omega, dt);
     Matrix3::new(
@@ -120,7 +120,7 @@ pub fn range_bearing_h(x: &Vector3<f64>, beacon: (f64, f64)) -> Vector2<f64> {
     Vector2::new(dx.hypot(dy), wrap_angle(dy.atan2(dx) - x[2]))
 }
 
-/// H_t = ∂h/∂x at x, analytic (seed §6.6; Thrun §7.4). Undefined at range 0: the
+/// H_t = ∂h/∂x at x, analytic (algorithms §6.6; Thrun §7.4). Undefined at range 0: the
 /// rows are then returned as zeros and callers must skip the reading (see [`MIN_RANGE`]).
 pub fn range_bearing_jacobian_h(x: &Vector3<f64>, beacon: (f64, f64)) -> Matrix2x3<f64> {
     let dx = beacon.0 - x[0];
@@ -142,6 +142,29 @@ pub fn range_bearing_jacobian_h(x: &Vector3<f64>, beacon: (f64, f64)) -> Matrix2
 
 /// Below this predicted range (m) the bearing is undefined and a beacon reading is skipped.
 pub const MIN_RANGE: f64 = 1e-6;
+
+/// Odometry beyond these bounds is not motion but a broken sensor or a corrupted message: every
+/// estimator ignores it (and counts it, [`crate::ReadingError::Invalid`]). The scenarios' robots
+/// reach 0.5–2 m/s and 2–4 rad/s and the world steps every 0.01 s, so the bounds leave a wide
+/// margin for odometry noise and faster robots while keeping every product v·dt, ω·dt and
+/// (v·dt)² of the motion models far from overflow.
+///
+/// |v| above this (m/s) is ignored.
+pub const MAX_ODOM_SPEED: f64 = 50.0;
+/// |ω| above this (rad/s) is ignored.
+pub const MAX_ODOM_TURN_RATE: f64 = 50.0;
+/// dt above this (s) is ignored: one odometry message covers one world step, and a step of a
+/// second already means the clock stalled.
+pub const MAX_ODOM_DT: f64 = 1.0;
+
+/// Whether odometry (v, ω) over dt describes a motion a robot can make: finite, |v| ≤
+/// [`MAX_ODOM_SPEED`], |ω| ≤ [`MAX_ODOM_TURN_RATE`] and 0 ≤ dt ≤ [`MAX_ODOM_DT`].
+#[inline]
+pub fn odometry_is_plausible(v: f64, omega: f64, dt: f64) -> bool {
+    v.abs() <= MAX_ODOM_SPEED
+        && omega.abs() <= MAX_ODOM_TURN_RATE
+        && (0.0..=MAX_ODOM_DT).contains(&dt)
+}
 
 /// Known beacon positions looked up by the id a reading carries, without allocation.
 ///

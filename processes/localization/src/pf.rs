@@ -1,14 +1,14 @@
-//! The particle filter (seed §6.7): J particles x^[j] = (x, y, θ) with weights w^[j]; proposal
+//! The particle filter (algorithms §6.7): J particles x^[j] = (x, y, θ) with weights w^[j]; proposal
 //! π = the unicycle motion model with sampled odometry noise, importance weights from the beacon
 //! and fix likelihoods, low-variance resampling when the effective sample size drops.
 //!
-//! Errata handled here (DESIGN.md): the seed's "draw i with probability ∝ w^[i]" is done on
+//! Errata handled here (docs/errata.md): the seed's "draw i with probability ∝ w^[i]" is done on
 //! weights normalised first (in log space, log-sum-exp, so 10⁴ tight likelihoods never underflow)
 //! and with Thrun's low-variance sampler (*Probabilistic Robotics*, Table 4.4) rather than J
 //! independent draws, which lose diversity faster; bearing innovations and particle headings are
 //! wrapped to (−π, π].
 
-use crate::models::{BeaconTable, MIN_RANGE, sinc, wrap_near};
+use crate::models::{BeaconTable, MIN_RANGE, odometry_is_plausible, sinc, wrap_near};
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
 use mole_types::{
@@ -29,6 +29,41 @@ pub const INITIAL_STD_XY: f64 = 0.05;
 pub const INITIAL_STD_THETA: f64 = 0.05;
 /// Mixed into the map's seed so the PF's stream differs from other processes' streams.
 const PF_SEED_SALT: u64 = 0x9F_F11E_5EED_0007;
+
+/// Normalises log weights in place by log-sum-exp (algorithms §6.7), writes the linear weights
+/// into `w` and returns N_eff = 1/Σw². When no log weight is finite the set is reset to uniform
+/// weights; a NaN log weight (impossible with checked inputs) weighs nothing.
+pub fn normalise_log_weights(log_w: &mut [f64], w: &mut [f64]) -> f64 {
+    let n = log_w.len();
+    let max = log_w
+        .iter()
+        .copied()
+        .filter(|l| l.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max);
+    if !max.is_finite() {
+        log_w.fill(-(n as f64).ln());
+        w.fill(1.0 / n as f64);
+        return n as f64;
+    }
+    let mut sum = 0.0;
+    for (w, &l) in w.iter_mut().zip(log_w.iter()) {
+        *w = if l.is_nan() { 0.0 } else { (l - max).exp() };
+        sum += *w;
+    }
+    // sum ≥ 1: the maximum contributes exp(0).
+    let log_norm = max + sum.ln();
+    let mut sum_sq = 0.0;
+    for (w, l) in w.iter_mut().zip(log_w.iter_mut()) {
+        *w /= sum;
+        *l = if *w > 0.0 {
+            *l - log_norm
+        } else {
+            f64::NEG_INFINITY
+        };
+        sum_sq += *w * *w;
+    }
+    1.0 / sum_sq
+}
 
 /// Thrun's low-variance sampler (*Probabilistic Robotics*, Table 4.4): with M = `out.len()`, the
 /// m-th pointer U = r + m/M (r ∈ [0, 1/M)) picks the particle i whose cumulative weight first
@@ -94,7 +129,7 @@ impl Default for PfConfig {
     }
 }
 
-/// The particle set Ψ = {⟨x^[j], w^[j]⟩} (seed §6.7), stored as columns, double-buffered for
+/// The particle set Ψ = {⟨x^[j], w^[j]⟩} (algorithms §6.7), stored as columns, double-buffered for
 /// resampling, with the summary (mean, covariance) kept current after every step.
 #[derive(Debug, Clone)]
 pub struct ParticleFilter {
@@ -233,13 +268,15 @@ impl ParticleFilter {
         self.resamples
     }
 
-    /// Sampling from the proposal π (seed §6.7, step 1): each particle moves along the unicycle
+    /// Sampling from the proposal π (algorithms §6.7, step 1): each particle moves along the unicycle
     /// arc with its own draw of the odometry noise, v^[j] = v + σ_v·n, ω^[j] = ω + σ_ω·n.
     ///
     /// The additive state noise of `noise.state_noise_rate` (the EKF's floor of R_t) is added to
     /// x, y and θ as well, so the particles diffuse in every direction, as the EKF's Σ does.
+    ///
+    /// Odometry that is not plausible ([`odometry_is_plausible`]) is ignored and counted.
     pub fn predict_with(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), ReadingError> {
-        if !(v.is_finite() && omega.is_finite() && dt.is_finite() && dt >= 0.0) {
+        if !odometry_is_plausible(v, omega, dt) {
             self.ignored += 1;
             return Err(ReadingError::Invalid);
         }
@@ -278,7 +315,7 @@ impl ParticleFilter {
         Ok(())
     }
 
-    /// Importance weights (seed §6.7, step 2) for one range-bearing reading: with the motion
+    /// Importance weights (algorithms §6.7, step 2) for one range-bearing reading: with the motion
     /// model as proposal, w^[j] ∝ p(z | x^[j]), here added as ln p in log space, bearing wrapped.
     pub fn weigh_beacon(&mut self, reading: &BeaconReading) -> Result<(), ReadingError> {
         if !(reading.range.is_finite() && reading.bearing.is_finite() && reading.range >= 0.0) {
@@ -330,42 +367,11 @@ impl ParticleFilter {
     /// Normalises the weights by log-sum-exp, η = 1/Σ exp(ln w), and computes N_eff = 1/Σw².
     /// A set whose log weights are all non-finite is reset to uniform weights.
     pub fn normalise(&mut self) -> f64 {
-        let n = self.x.len();
-        let max = self
-            .log_w
-            .iter()
-            .copied()
-            .filter(|l| l.is_finite())
-            .fold(f64::NEG_INFINITY, f64::max);
-        if !max.is_finite() {
-            self.log_w.fill(-(n as f64).ln());
-            self.w.fill(1.0 / n as f64);
-            self.n_eff = n as f64;
-            return self.n_eff;
-        }
-        let mut sum = 0.0;
-        for (w, &l) in self.w.iter_mut().zip(self.log_w.iter()) {
-            // NaN log weights (impossible with checked inputs) weigh nothing.
-            *w = if l.is_nan() { 0.0 } else { (l - max).exp() };
-            sum += *w;
-        }
-        // sum ≥ 1: the maximum contributes exp(0).
-        let log_norm = max + sum.ln();
-        let mut sum_sq = 0.0;
-        for (w, l) in self.w.iter_mut().zip(self.log_w.iter_mut()) {
-            *w /= sum;
-            *l = if *w > 0.0 {
-                *l - log_norm
-            } else {
-                f64::NEG_INFINITY
-            };
-            sum_sq += *w * *w;
-        }
-        self.n_eff = 1.0 / sum_sq;
+        self.n_eff = normalise_log_weights(&mut self.log_w, &mut self.w);
         self.n_eff
     }
 
-    /// Resampling (seed §6.7, step 3) with the low-variance sampler into the second buffer,
+    /// Resampling (algorithms §6.7, step 3) with the low-variance sampler into the second buffer,
     /// then the buffers swap and the weights become uniform.
     pub fn resample(&mut self) {
         let n = self.x.len();

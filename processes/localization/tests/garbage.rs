@@ -1,7 +1,13 @@
-//! Garbage in never panics: every estimator takes arbitrary odometry, beacon readings (NaN,
-//! infinities, unknown ids, counts above capacity) and fixes (bad flags, NaN) in any order.
+//! Garbage in never poisons an estimator: every estimator takes arbitrary odometry, beacon
+//! readings (NaN, infinities, absurd but finite values, unknown ids, counts above capacity) and
+//! fixes (bad flags, NaN) in any order, and after every step still publishes a finite pose and a
+//! finite covariance; the histogram's belief stays a distribution and the PF's weights stay
+//! normalised. Odometry no robot could produce is ignored and counted, and leaves the pose alone.
 
-use mole_localization::{BayesConfig, Estimator, EstimatorKind, HistogramFilter};
+use mole_localization::models::{MAX_ODOM_DT, MAX_ODOM_SPEED, MAX_ODOM_TURN_RATE};
+use mole_localization::{
+    BayesConfig, Ekf, Estimator, HistogramFilter, Kf, ParticleFilter, PfConfig,
+};
 use mole_types::{BeaconReading, BeaconSite, Beacons, Fix, Odom, Particles, Pose, WorldMap};
 use proptest::prelude::*;
 
@@ -33,6 +39,29 @@ fn map() -> Box<WorldMap> {
     m
 }
 
+/// The PF with fewer particles and a coarse histogram keep the debug run fast; the code paths
+/// are those of the defaults.
+fn small_pf(map: &WorldMap) -> ParticleFilter {
+    ParticleFilter::from_map_with(
+        map,
+        PfConfig {
+            n_particles: 500,
+            ..Default::default()
+        },
+    )
+}
+
+fn coarse_histogram(map: &WorldMap) -> HistogramFilter {
+    HistogramFilter::from_map_with(
+        map,
+        BayesConfig {
+            cell_size: 0.25,
+            heading_bins: 8,
+            ..Default::default()
+        },
+    )
+}
+
 fn any_f64() -> impl Strategy<Value = f64> {
     prop_oneof![
         -10.0..10.0f64,
@@ -43,6 +72,7 @@ fn any_f64() -> impl Strategy<Value = f64> {
         Just(-0.0),
         Just(1e300),
         Just(-1e300),
+        Just(1e6),
         Just(f64::MIN_POSITIVE),
     ]
 }
@@ -65,11 +95,57 @@ fn op() -> impl Strategy<Value = Op> {
     ]
 }
 
-fn run(est: &mut dyn Estimator, ops: &[Op]) {
+/// The published summary is usable: a finite pose and a finite covariance.
+fn check_summary(name: &str, est: &dyn Estimator) -> Result<(), TestCaseError> {
+    let p = est.pose();
+    prop_assert!(
+        p.x.is_finite() && p.y.is_finite() && p.theta.is_finite(),
+        "{name}: pose {p:?}"
+    );
+    let c = est.covariance();
+    prop_assert!(c.iter().all(|v| v.is_finite()), "{name}: covariance {c:?}");
+    let mut out: Pose = bytemuck::Zeroable::zeroed();
+    est.write_pose(&mut out);
+    prop_assert!(
+        out.x.is_finite() && out.y.is_finite() && out.theta.is_finite(),
+        "{name}: published pose {out:?}"
+    );
+    Ok(())
+}
+
+/// The histogram's belief is a distribution: every cell finite and ≥ 0, Σ Bel = 1 within 1e-9.
+fn check_belief(f: &HistogramFilter) -> Result<(), TestCaseError> {
+    let bel = f.belief();
+    prop_assert!(
+        bel.iter().all(|p| p.is_finite() && *p >= 0.0),
+        "bayes: a cell is negative or not finite"
+    );
+    let s: f64 = bel.iter().sum();
+    prop_assert!((s - 1.0).abs() < 1e-9, "bayes: Σ Bel = {}", s);
+    Ok(())
+}
+
+/// The PF's weights are normalised: every w finite and ≥ 0, Σ w = 1 within 1e-9.
+fn check_weights(pf: &ParticleFilter) -> Result<(), TestCaseError> {
+    let w = pf.weights();
+    prop_assert!(
+        w.iter().all(|w| w.is_finite() && *w >= 0.0),
+        "pf: a weight is negative or not finite"
+    );
+    let s: f64 = w.iter().sum();
+    prop_assert!((s - 1.0).abs() < 1e-9, "pf: Σ w = {}", s);
+    Ok(())
+}
+
+/// Feeds `ops` to `est` and runs `check` after every one of them.
+fn run<E: Estimator>(
+    est: &mut E,
+    ops: &[Op],
+    check: impl Fn(&E) -> Result<(), TestCaseError>,
+) -> Result<(), TestCaseError> {
     let mut beacons: Box<Beacons> = bytemuck::zeroed_box();
     let mut fix: Fix = bytemuck::Zeroable::zeroed();
     let mut odom: Odom = bytemuck::Zeroable::zeroed();
-    let mut pose: Pose = bytemuck::Zeroable::zeroed();
     let mut particles: Box<Particles> = bytemuck::zeroed_box();
     for op in ops {
         match op {
@@ -95,34 +171,114 @@ fn run(est: &mut dyn Estimator, ops: &[Op]) {
                 est.correct(&beacons, &fix);
             }
         }
-        est.write_pose(&mut pose);
         est.write_particles(&mut particles);
-        let _ = (est.rejected(), est.ignored());
+        check(est)?;
     }
+    Ok(())
 }
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
+    /// Whatever arrives, every estimator's output stays finite and its belief normalised.
     #[test]
-    fn no_estimator_panics_on_garbage(ops in prop::collection::vec(op(), 1..25)) {
+    fn garbage_never_poisons_an_estimator(ops in prop::collection::vec(op(), 1..25)) {
         let map = map();
-        for kind in [EstimatorKind::Kf, EstimatorKind::Ekf] {
-            let mut est = kind.from_map(&map).map_err(|e| TestCaseError::fail(e.to_string()))?;
-            run(est.as_mut(), &ops);
-        }
-        // The PF with fewer particles and a coarse histogram keep the debug run fast; the code
-        // paths are those of the defaults.
-        let mut pf = mole_localization::ParticleFilter::from_map_with(
-            &map,
-            mole_localization::PfConfig { n_particles: 500, ..Default::default() },
-        );
-        run(&mut pf, &ops);
-        let mut bayes = HistogramFilter::from_map_with(
-            &map,
-            BayesConfig { cell_size: 0.25, heading_bins: 8, ..Default::default() },
-        );
-        run(&mut bayes, &ops);
-        let s: f64 = bayes.belief().iter().sum();
-        prop_assert!((s - 1.0).abs() < 1e-9 || s.is_nan(), "Σ Bel = {}", s);
+        run(&mut Kf::from_map(&map), &ops, |e| check_summary("kf", e))?;
+        run(&mut Ekf::from_map(&map), &ops, |e| check_summary("ekf", e))?;
+        run(&mut small_pf(&map), &ops, |pf| {
+            check_summary("pf", pf)?;
+            check_weights(pf)
+        })?;
+        run(&mut coarse_histogram(&map), &ops, |f| {
+            check_summary("bayes", f)?;
+            check_belief(f)
+        })?;
     }
+}
+
+/// Odometry that is finite but no robot produces: (v m/s, ω rad/s, dt s).
+const ABSURD_ODOMETRY: [(f64, f64, f64); 9] = [
+    (1e300, 0.0, 0.01),
+    (-1e300, 0.0, 0.01),
+    (0.0, 1e300, 0.01),
+    (0.3, 0.2, 1e300),
+    (1e300, 1e300, 1e300),
+    (1e6, 0.0, 0.01),
+    (0.0, -1e6, 0.01),
+    (0.3, 0.2, 1e6),
+    (
+        MAX_ODOM_SPEED * 1.01,
+        MAX_ODOM_TURN_RATE * 1.01,
+        MAX_ODOM_DT * 1.01,
+    ),
+];
+
+/// Each absurd odometry reading is ignored and counted, leaves the pose where it was, and the
+/// estimator still follows plausible odometry afterwards.
+fn absurd_odometry_is_ignored(name: &str, est: &mut dyn Estimator) {
+    let mut odom: Odom = bytemuck::Zeroable::zeroed();
+    for (i, &(v, omega, dt)) in ABSURD_ODOMETRY.iter().enumerate() {
+        let (before, ignored) = (est.pose(), est.ignored());
+        (odom.v, odom.omega, odom.dt) = (v, omega, dt);
+        est.predict(&odom);
+        assert_eq!(
+            est.ignored(),
+            ignored + 1,
+            "{name}: odometry #{i} ({v:e}, {omega:e}, {dt:e}) was not ignored"
+        );
+        assert_eq!(
+            est.pose(),
+            before,
+            "{name}: odometry #{i} ({v:e}, {omega:e}, {dt:e}) moved the pose"
+        );
+        check_summary(name, est).unwrap_or_else(|e| panic!("{e}"));
+    }
+    // The robot at (1, 1) facing +x drives 0.5 m: the estimate follows.
+    let ignored = est.ignored();
+    (odom.v, odom.omega, odom.dt) = (0.5, 0.0, 0.01);
+    for _ in 0..100 {
+        est.predict(&odom);
+    }
+    assert_eq!(est.ignored(), ignored, "{name}: plausible odometry ignored");
+    let p = est.pose();
+    assert!(
+        (p.x - 1.5).abs() < 0.1 && (p.y - 1.0).abs() < 0.1,
+        "{name}: {p:?} after 0.5 m along +x from (1, 1)"
+    );
+}
+
+#[test]
+fn absurd_odometry_is_ignored_by_every_estimator() {
+    let map = map();
+    absurd_odometry_is_ignored("kf", &mut Kf::from_map(&map));
+    absurd_odometry_is_ignored("ekf", &mut Ekf::from_map(&map));
+    let mut pf = small_pf(&map);
+    absurd_odometry_is_ignored("pf", &mut pf);
+    check_weights(&pf).unwrap_or_else(|e| panic!("{e}"));
+    let mut bayes = coarse_histogram(&map);
+    absurd_odometry_is_ignored("bayes", &mut bayes);
+    check_belief(&bayes).unwrap_or_else(|e| panic!("{e}"));
+}
+
+#[test]
+fn odometry_at_the_bounds_is_used() {
+    let map = map();
+    let mut odom: Odom = bytemuck::Zeroable::zeroed();
+    (odom.v, odom.omega, odom.dt) = (-MAX_ODOM_SPEED, MAX_ODOM_TURN_RATE, MAX_ODOM_DT);
+    let mut kf = Kf::from_map(&map);
+    let mut ekf = Ekf::from_map(&map);
+    let mut pf = small_pf(&map);
+    let mut bayes = coarse_histogram(&map);
+    for (name, est) in [
+        ("kf", &mut kf as &mut dyn Estimator),
+        ("ekf", &mut ekf),
+        ("pf", &mut pf),
+        ("bayes", &mut bayes),
+    ] {
+        est.predict(&odom);
+        assert_eq!(est.ignored(), 0, "{name}: odometry at the bounds ignored");
+        check_summary(name, est).unwrap_or_else(|e| panic!("{e}"));
+    }
+    check_weights(&pf).unwrap_or_else(|e| panic!("{e}"));
+    check_belief(&bayes).unwrap_or_else(|e| panic!("{e}"));
 }
