@@ -1,10 +1,55 @@
 //! Bad input never crashes anything and never passes silently: a clear one-line error, exit 2.
 
 use mole_integration_tests::*;
-use std::time::Duration;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
-fn stderr_of(output: &std::process::Output) -> String {
+/// How long a `mole up` that must be refused may run: the refusal comes before any process
+/// starts, so this only keeps a wrongly accepted run, or a hang, from stalling the test run.
+const REFUSAL_TIMEOUT: Duration = Duration::from_secs(60);
+
+fn stderr_of(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// Runs a `mole up` that must be refused. Still running after [`REFUSAL_TIMEOUT`] (it accepted
+/// the input, or hangs), it is stopped as Ctrl-C would (it stops its children and cleans up),
+/// killed if that does not end it, and the test fails with what it printed.
+fn refused(mut command: Command) -> Output {
+    use nix::sys::signal::{Signal, kill};
+    use nix::unistd::Pid;
+    let mut child = command
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start mole up");
+    let deadline = Instant::now() + REFUSAL_TIMEOUT;
+    while child.try_wait().expect("poll mole up").is_none() {
+        if Instant::now() > deadline {
+            let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGINT);
+            let stop_deadline = Instant::now() + Duration::from_secs(15);
+            while child.try_wait().ok().flatten().is_none() && Instant::now() < stop_deadline {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = child.kill();
+            let output = child.wait_with_output().expect("reap mole up");
+            panic!(
+                "mole up was not refused within {REFUSAL_TIMEOUT:?}:\n{}",
+                stderr_of(&output)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("collect mole up's output")
+}
+
+/// `mole up ARGS` in a namespace and output directory of its own, which must be refused.
+fn refused_up(test: &str, args: &[&str]) -> Output {
+    let namespace = unique_namespace(test);
+    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+    let output = refused(mole_command(&namespace, &out, args));
+    let _ = std::fs::remove_dir_all(&out);
+    output
 }
 
 fn write_temp(name: &str, text: &str) -> std::path::PathBuf {
@@ -13,6 +58,8 @@ fn write_temp(name: &str, text: &str) -> std::path::PathBuf {
     path
 }
 
+/// A launch file with a bad value or an unknown field is refused naming the file, the line, the
+/// field and the choices.
 #[test]
 fn a_malformed_launch_file_names_file_line_and_field() {
     let good = std::fs::read_to_string(workspace().join("launch/stacks/default.toml")).unwrap();
@@ -22,7 +69,8 @@ fn a_malformed_launch_file_names_file_line_and_field() {
         "the default launch file has an on-failure policy to break"
     );
     let path = write_temp("launch.toml", &bad);
-    let output = run_mole(&["up", path.to_str().unwrap(), "--quiet"]);
+    let output = refused_up("bad-launch", &[path.to_str().unwrap()]);
+    let _ = std::fs::remove_file(&path);
     let err = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(
@@ -44,14 +92,17 @@ fn a_malformed_launch_file_names_file_line_and_field() {
         "unknown.toml",
         &good.replacen("[stack]", "[stack]\nbogus_field = 1", 1),
     );
-    let output = run_mole(&["up", path.to_str().unwrap(), "--quiet"]);
+    let output = refused_up("unknown-field", &[path.to_str().unwrap()]);
+    let _ = std::fs::remove_file(&path);
     let err = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(err.contains("bogus_field"), "{err}");
 }
 
+/// A scenario with a value of the wrong type is refused naming the file, the line, the field,
+/// what it found and what was expected; a missing scenario is refused too.
 #[test]
-fn a_malformed_scenario_names_file_line_and_field() {
+fn a_malformed_scenario_names_file_line_field_and_what_was_expected() {
     let good = std::fs::read_to_string(workspace().join("scenarios/default.toml")).unwrap();
     let (line_no, line) = good
         .lines()
@@ -60,27 +111,33 @@ fn a_malformed_scenario_names_file_line_and_field() {
         .expect("the default scenario sets the robot radius");
     let bad = good.replacen(line, "radius = \"big\"", 1);
     let path = write_temp("scenario.toml", &bad);
-    let output = run_mole(&["up", "--scenario", path.to_str().unwrap(), "--quiet"]);
+    let output = refused_up("bad-scenario", &["--scenario", path.to_str().unwrap()]);
+    let _ = std::fs::remove_file(&path);
     let err = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(
         err.contains(path.file_name().unwrap().to_str().unwrap()),
-        "{err}"
+        "names the file: {err}"
     );
-    assert!(err.contains("radius"), "{err}");
+    assert!(err.contains("`robot.radius`"), "names the field: {err}");
+    assert!(
+        err.contains("\"big\"") && err.contains("expected f64"),
+        "says what it found and what was expected: {err}"
+    );
     assert!(
         err.contains(&format!(":{}:", line_no + 1)),
         "names line {}: {err}",
         line_no + 1
     );
 
-    let output = run_mole(&["up", "--scenario", "/nonexistent/scenario.toml", "--quiet"]);
+    let output = refused_up("no-scenario", &["--scenario", "/nonexistent/scenario.toml"]);
     assert_eq!(output.status.code(), Some(2), "{}", stderr_of(&output));
 }
 
+/// `--swap` with an unknown role, a missing program or no command is refused in one line.
 #[test]
 fn swap_errors_are_one_clear_line() {
-    let output = run_mole(&["up", "--swap", "navigator=/bin/true", "--quiet"]);
+    let output = refused_up("bad-role", &["--swap", "navigator=/bin/true"]);
     let err = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(
@@ -89,24 +146,23 @@ fn swap_errors_are_one_clear_line() {
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
 
-    let output = run_mole(&["up", "--swap", "planning=/nonexistent/planner", "--quiet"]);
+    let output = refused_up("no-program", &["--swap", "planning=/nonexistent/planner"]);
     let err = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(err.contains("/nonexistent/planner"), "{err}");
 
-    let output = run_mole(&["up", "--swap", "planning", "--quiet"]);
+    let output = refused_up("no-command", &["--swap", "planning"]);
     assert_eq!(output.status.code(), Some(2), "{}", stderr_of(&output));
 }
 
+/// A second `mole up` in a namespace a running stack uses is refused, naming the namespace.
 #[test]
 fn a_namespace_in_use_is_refused() {
     let _serial = serial();
     let stack = Stack::start("ns-busy", &["--mode", "realtime", "--ticks", "100000"]);
     stack.wait_for_log("world", "ready", Duration::from_secs(60));
     let out = std::env::temp_dir().join(format!("mole-{}-second", stack.namespace));
-    let output = mole_command(&stack.namespace, &out, &["--ticks", "10"])
-        .output()
-        .expect("run");
+    let output = refused(mole_command(&stack.namespace, &out, &["--ticks", "10"]));
     let err = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(

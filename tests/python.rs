@@ -1,7 +1,8 @@
 //! A process in another language: the Python planner of `examples/python_planner` (the iceoryx2
 //! package from PyPI, ctypes layouts generated from shared-types) in the planning role of the
-//! real stack. Skipped, with the reason on stderr, where no Python has the iceoryx2 package at
-//! the stack's version (`scripts/python-env.sh` installs it; `.ci/run` calls it).
+//! real stack. Skipped (failed under CI), with the reason on stderr, where no Python has the
+//! iceoryx2 package at the stack's version (`scripts/python-env.sh` installs it; `.ci/run` calls
+//! it).
 
 use mole_integration_tests::*;
 use mole_types::{DIRECTION_PUBLISH, DIRECTION_SUBSCRIBE, Stats, read_name, topics};
@@ -57,14 +58,9 @@ fn python() -> Result<String, String> {
     ))
 }
 
-fn python_or_skip() -> Option<String> {
-    match python() {
-        Ok(python) => Some(python),
-        Err(reason) => {
-            eprintln!("skipped: {reason}");
-            None
-        }
-    }
+/// The Python to run the planner with, or `None` after [`skip`] said why there is none.
+fn python_or_skip(test: &str) -> Option<String> {
+    python().map_err(|reason| skip(test, &reason)).ok()
 }
 
 /// `--swap planning=...` running the planner with `python`.
@@ -105,9 +101,13 @@ fn steps_at_stop(planning_log: &str) -> Option<u64> {
     line.split_whitespace().next()?.parse().ok()
 }
 
+/// The Python planner handles every tick of a lockstep run without touching a wall, and two
+/// runs of one seed are identical.
 #[test]
 fn the_python_planner_drives_the_lockstep_stack_deterministically() {
-    let Some(python) = python_or_skip() else {
+    let Some(python) =
+        python_or_skip("the_python_planner_drives_the_lockstep_stack_deterministically")
+    else {
         return;
     };
     let _serial = serial();
@@ -125,7 +125,9 @@ fn the_python_planner_drives_the_lockstep_stack_deterministically() {
         f64_of(&first, "path_length_m") > 2.0,
         "the robot moved: {first:#}"
     );
-    assert!(f64_of(&first, "max_penetration_m") <= 0.001, "{first:#}");
+    // The world keeps any command within 1 mm of penetration; keeping off the walls is the
+    // wanderer's own doing.
+    assert_eq!(first["contact_events"].as_u64(), Some(0), "{first:#}");
     assert_eq!(first["restarts"]["planning"], 0, "{first:#}");
     // The world measures the loop latency from the origin_ns the planner copied from the pose:
     // a planner that dropped it would show the machine's uptime here.
@@ -143,31 +145,28 @@ fn the_python_planner_drives_the_lockstep_stack_deterministically() {
     assert_eq!(left_behind(&before), Vec::<String>::new(), "left behind");
 }
 
-/// The latest stack/stats of the Python planner: pid, steps, and per topic (count, rate).
+/// The latest stack/stats of the Python planner: pid, steps handled, and per topic (direction,
+/// count over the whole run).
 #[derive(Debug, Default)]
 struct PlannerStats {
     pid: u32,
     steps: u64,
     cpu_ns: u64,
-    topics: BTreeMap<String, (u32, u64, f32)>,
+    topics: BTreeMap<String, (u32, u64)>,
 }
 
 impl PlannerStats {
-    /// Whether the last window shows planning/cmd published at more than half the world's
-    /// 100 Hz.
-    fn commanding(&self) -> bool {
-        self.topics
-            .get("planning/cmd")
-            .is_some_and(|(direction, count, rate)| {
-                *direction == DIRECTION_PUBLISH && *count > 0 && *rate > 50.0
-            })
+    /// Messages published on `topic` so far.
+    fn published(&self, topic: &str) -> u64 {
+        match self.topics.get(topic) {
+            Some(&(direction, count)) if direction == DIRECTION_PUBLISH => count,
+            _ => 0,
+        }
     }
 
-    /// Whether planning/status was published (its count runs over the whole run).
-    fn reporting_status(&self) -> bool {
-        self.topics
-            .get("planning/status")
-            .is_some_and(|(direction, count, _)| *direction == DIRECTION_PUBLISH && *count > 0)
+    /// Whether the planner has handled steps and published one command for each.
+    fn commanding(&self) -> bool {
+        self.steps > 0 && self.published("planning/cmd") == self.steps
     }
 }
 
@@ -181,9 +180,12 @@ fn status_at_monitor(stats: &Stats) -> Option<(u64, u64)> {
         .map(|t| (t.count, t.invalid))
 }
 
+/// In realtime the Python planner publishes its statistics (one command per handled step), the
+/// monitor receives its status, and it handles at least 720 of the run's 801 ticks.
 #[test]
 fn the_python_planner_reports_its_statistics_in_realtime() {
-    let Some(python) = python_or_skip() else {
+    let Some(python) = python_or_skip("the_python_planner_reports_its_statistics_in_realtime")
+    else {
         return;
     };
     let _serial = serial();
@@ -198,8 +200,8 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
     stack.wait_for_log("planning", "ready", Duration::from_secs(60));
     let observer = join_realtime_stack(&stack.namespace, "observer");
     let mut stats_sub = observer.subscriber(topics::STACK_STATS).expect("stats");
-    // Watch until a window of a second shows the planner commanding at the world's rate, one
-    // more window came, and the monitor reports planning/status received. No Rust planner runs
+    // Watch until the planner has published one command per handled step, a second statistics
+    // sample came, and the monitor reports planning/status received. No Rust planner runs
     // (the Python one took its place), so what the monitor received came from the Python one.
     let mut seen = PlannerStats::default();
     let mut at_monitor: Option<(u64, u64)> = None;
@@ -223,7 +225,7 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
                     .iter()
                     .map(|t| {
                         let name = read_name(&t.topic).into_owned();
-                        (name, (t.direction, t.count, t.rate_hz))
+                        (name, (t.direction, t.count))
                     })
                     .collect();
             }
@@ -238,11 +240,11 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
 
     assert!(
         seen.commanding(),
-        "planning/cmd at the world's rate: {seen:?}"
+        "one planning/cmd per handled step: {seen:?}"
     );
     assert!(samples >= 2, "statistics once a second: {samples} in 30 s");
     assert!(
-        seen.reporting_status(),
+        seen.published("planning/status") > 0,
         "the planner publishes planning/status: {seen:?}"
     );
     assert!(
@@ -274,6 +276,7 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
     let logs = logs(&keep);
     let summary = summary(&keep);
+    let planning_log = std::fs::read_to_string(keep.join("logs/planning.log")).unwrap_or_default();
     let _ = std::fs::remove_dir_all(&keep);
     assert!(
         output.status.success(),
@@ -282,10 +285,14 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
     );
     assert!(processes_of(&namespace).is_empty(), "processes left behind");
     assert_eq!(summary["ticks"], 800, "{summary:#}");
-    let rate = summary["topics"]["planning/cmd"]["rate_hz"]
-        .as_f64()
-        .unwrap_or(0.0);
-    assert!(rate > 50.0, "planning/cmd at {rate} Hz: {summary:#}");
+    // The world steps every 10 ms with or without a new command, and the planner takes the
+    // newest pose: it handles each tick at most once and, keeping up, nearly all of the run's
+    // 801 (0 to 800; the world starts once the planner listens).
+    let steps = steps_at_stop(&planning_log).unwrap_or(0);
+    assert!(
+        (720..=801).contains(&steps),
+        "the planner handled {steps} of the 801 ticks:\n{planning_log}"
+    );
     assert!(summary["hangs"].get("planning").is_none(), "{summary:#}");
     assert_eq!(summary["restarts"]["planning"], 0, "{summary:#}");
     assert!(

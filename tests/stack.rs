@@ -33,6 +33,15 @@ fn stack_wait_keep(
     stack: Stack,
     out: &std::path::Path,
 ) -> (std::process::Output, String, serde_json::Value) {
+    let (output, logs, summary, _) = stack_wait_keep_world_log(stack, out);
+    (output, logs, summary)
+}
+
+/// [`stack_wait_keep`], and the world's whole log.
+fn stack_wait_keep_world_log(
+    stack: Stack,
+    out: &std::path::Path,
+) -> (std::process::Output, String, serde_json::Value, String) {
     let keep = out.with_extension("kept");
     let _ = std::fs::remove_dir_all(&keep);
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
@@ -42,8 +51,36 @@ fn stack_wait_keep(
     } else {
         serde_json::Value::Null
     };
+    let world_log = std::fs::read_to_string(keep.join("logs/world.log")).unwrap_or_default();
     let _ = std::fs::remove_dir_all(&keep);
-    (output, logs, summary)
+    (output, logs, summary, world_log)
+}
+
+/// When a world stepped: the stamps of its `ready` and `run complete` log lines (RFC 3339 in
+/// UTC with a fixed number of digits, so they compare as text).
+fn stepping_span(world_log: &str) -> (String, String) {
+    let stamp = |needle: &str| {
+        let line = world_log
+            .lines()
+            .find(|l| l.contains(needle))
+            .unwrap_or_else(|| panic!("the world never logged `{needle}`:\n{world_log}"));
+        // The first word, without its terminal colours (ESC [ ... letter).
+        let mut plain = String::new();
+        let mut chars = line.chars();
+        while let Some(c) = chars.next() {
+            if c == '\u{1b}' {
+                chars.by_ref().find(char::is_ascii_alphabetic);
+            } else {
+                plain.push(c);
+            }
+        }
+        plain
+            .split_whitespace()
+            .next()
+            .unwrap_or_default()
+            .to_string()
+    };
+    (stamp(" ready "), stamp("run complete"))
 }
 
 fn f64_of(summary: &serde_json::Value, field: &str) -> f64 {
@@ -118,29 +155,31 @@ fn lockstep_run_explores_without_penetrating_and_reports_every_field() {
     );
 }
 
+/// A lockstep summary without what differs from run to run (wall time, latencies, wall-clock
+/// rates): what the scenario and seed alone decide.
+fn deterministic(summary: &serde_json::Value) -> serde_json::Value {
+    let mut s = summary.clone();
+    if let Some(o) = s.as_object_mut() {
+        for key in [
+            "wall_time_s",
+            "launcher_wall_time_s",
+            "loop_latency_us",
+            "estimator_update_us",
+            "topics",
+        ] {
+            o.remove(key);
+        }
+    }
+    s
+}
+
 #[test]
 fn two_lockstep_runs_with_the_same_seed_are_identical() {
     let _serial = serial();
     let first = lockstep_run("det-a", 1500, 42);
     let second = lockstep_run("det-b", 1500, 42);
     let other = lockstep_run("det-c", 1500, 43);
-    // Wall time, latencies and wall-clock rates differ from run to run; nothing else may.
-    let strip = |s: &serde_json::Value| {
-        let mut s = s.clone();
-        if let Some(o) = s.as_object_mut() {
-            for key in [
-                "wall_time_s",
-                "launcher_wall_time_s",
-                "loop_latency_us",
-                "estimator_update_us",
-                "topics",
-            ] {
-                o.remove(key);
-            }
-        }
-        s
-    };
-    assert_eq!(strip(&first), strip(&second));
+    assert_eq!(deterministic(&first), deterministic(&second));
     assert_eq!(first["grid_hash"], second["grid_hash"]);
     assert_eq!(first["contact_hash"], second["contact_hash"]);
     assert_ne!(
@@ -247,21 +286,70 @@ fn in_the_dark_room_touch_alone_builds_the_contact_grid() {
     );
 }
 
+/// Two lockstep stacks with different seeds, stepping at the same time in two namespaces, each
+/// give exactly their solo run of the same seed: neither reads, steals or cleans away anything
+/// of the other.
 #[test]
 fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
     let _serial = serial();
-    let args = ["--mode", "lockstep", "--ticks", "1500", "--seed", "5"];
-    let a = Stack::start("robot-a", &args);
-    let b = Stack::start("robot-b", &args);
+    let before = shm_files();
+    // The histogram filter makes a step take milliseconds, so 400 steps outlast the difference
+    // between two start-ups and the two runs do overlap.
+    let args = |seed: &'static str| {
+        [
+            "--mode",
+            "lockstep",
+            "--ticks",
+            "400",
+            "--seed",
+            seed,
+            "--estimator",
+            "bayes",
+        ]
+    };
+    let alone = |test: &str, seed| {
+        let stack = Stack::start(test, &args(seed));
+        let out = stack.out.clone();
+        let (output, logs, summary) = stack_wait_keep(stack, &out);
+        assert!(output.status.success(), "{test}: {logs}");
+        summary
+    };
+    let (alone_a, alone_b) = (alone("alone-a", "5"), alone("alone-b", "6"));
+    assert_ne!(
+        alone_a["grid_hash"], alone_b["grid_hash"],
+        "the two seeds give two different runs, so a crossed topic would show"
+    );
+
+    let a = Stack::start("robot-a", &args("5"));
+    let b = Stack::start("robot-b", &args("6"));
+    let (namespace_a, namespace_b) = (a.namespace.clone(), b.namespace.clone());
     let (out_a, out_b) = (a.out.clone(), b.out.clone());
-    let (output_a, logs_a, summary_a) = stack_wait_keep(a, &out_a);
-    let (output_b, logs_b, summary_b) = stack_wait_keep(b, &out_b);
+    let (output_a, logs_a, side_a, world_a) = stack_wait_keep_world_log(a, &out_a);
+    let (output_b, logs_b, side_b, world_b) = stack_wait_keep_world_log(b, &out_b);
     assert!(output_a.status.success(), "{logs_a}");
     assert!(output_b.status.success(), "{logs_b}");
-    // Same seed, separate namespaces: each run is exactly what it would be alone.
-    assert_eq!(summary_a["grid_hash"], summary_b["grid_hash"]);
-    assert_eq!(summary_a["path_length_m"], summary_b["path_length_m"]);
-    assert_eq!(summary_a["topics"]["world/truth"]["dropped"], 0);
+    let (span_a, span_b) = (stepping_span(&world_a), stepping_span(&world_b));
+    assert!(
+        span_a.0 < span_b.1 && span_b.0 < span_a.1,
+        "the two worlds stepped at the same time: a {span_a:?}, b {span_b:?}"
+    );
+    for (alone, side, name) in [(&alone_a, &side_a, "a"), (&alone_b, &side_b, "b")] {
+        assert_eq!(side["ticks"], 400, "{name}: {side:#}");
+        assert_eq!(side["grid_hash"], alone["grid_hash"], "{name}");
+        assert_eq!(side["contact_hash"], alone["contact_hash"], "{name}");
+        let (side, alone) = (deterministic(side), deterministic(alone));
+        let differing: Vec<String> = side
+            .as_object()
+            .into_iter()
+            .flatten()
+            .filter(|(field, value)| alone.get(field.as_str()) != Some(*value))
+            .map(|(field, value)| format!("{field}: {value}, alone {}", alone[field.as_str()]))
+            .collect();
+        assert!(differing.is_empty(), "{name}: {differing:#?}");
+        assert_eq!(side, alone, "{name}");
+    }
+    assert!(processes_of(&namespace_a).is_empty() && processes_of(&namespace_b).is_empty());
+    assert_eq!(left_behind(&before), Vec::<String>::new(), "left behind");
 }
 
 /// Position RMSE bounds per estimator on 1500 lockstep steps of the default scenario: a quarter

@@ -1,6 +1,7 @@
-//! Hot swap through `mole swap` (stack/control): lockstep loses and repeats no step, realtime
-//! reports its gap, and every refusal leaves the running stack untouched. The realtime run also
-//! checks that iceoryx2's service listing shows every topic with its type name.
+//! Hot swap through `mole swap` (stack/control): lockstep loses no step and no consumer handles
+//! one twice, over ticks the launcher observed; realtime reports its gap, and every refusal
+//! leaves the running stack untouched. The realtime run also checks that iceoryx2's service
+//! listing shows every topic with its type name.
 
 use mole_integration_tests::*;
 use std::process::Output;
@@ -20,6 +21,8 @@ fn text(output: &Output) -> String {
     )
 }
 
+/// Lockstep swaps of every swappable role observe ticks and lose none, no consumer handles one
+/// twice, and refused or failed swaps leave the old process in its role.
 #[test]
 fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     let _serial = serial();
@@ -97,6 +100,11 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     let swaps = s["swaps"].as_array().expect("swaps in summary.json");
     assert_eq!(swaps.len(), 4, "{s}");
     for swap in swaps {
+        // "0 lost, 0 repeated" means something only over ticks the launcher saw.
+        assert!(
+            swap["ticks_observed"].as_u64().is_some_and(|n| n > 0),
+            "{swap}"
+        );
         assert_eq!(swap["steps_lost"], 0, "{swap}");
         assert_eq!(swap["steps_repeated"], 0, "{swap}");
     }
@@ -105,6 +113,8 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
 }
 
+/// A realtime swap reports its gap over the ticks it observed, and the run completes with the
+/// estimate taken over.
 #[test]
 fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
     let _serial = serial();
@@ -147,6 +157,10 @@ fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
     // a second is a correctness check (a lost role would stay silent), not a timing target.
     assert!(gap > 0.0 && gap < 1000.0, "gap {gap} ms");
     assert!(period > 0.0, "{s}");
+    assert!(
+        swaps[0]["ticks_observed"].as_u64().is_some_and(|n| n > 0),
+        "{s}"
+    );
     assert_eq!(s["restarts"]["localization"], 0, "a swap is not a restart");
     assert!(
         localization_log.contains("took over the running estimate"),

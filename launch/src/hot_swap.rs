@@ -4,8 +4,9 @@
 //! it announces its first handled step (its first `stack/stats` sample with `steps > 0`), the old
 //! one gets SIGTERM. Inputs are never unread, so in lockstep no step is lost; every consumer
 //! handles each tick once ([`mole_runtime::StepGate`]), so the overlap repeats none. The
-//! launcher watches the role's output topic and world/truth during the swap and reports the
-//! longest silence and, in lockstep, any lost or repeated world step.
+//! launcher watches the role's output topic, world/truth and the outputs of the processes that
+//! read the role's output during the swap, and reports how many ticks it observed, the longest
+//! silence and, in lockstep, any lost step and any step a consumer handled twice.
 
 use crate::ChildSpec;
 use crate::Supervisor;
@@ -34,9 +35,13 @@ pub struct SwapReport {
     pub gap: Duration,
     /// Median interval on `topic` during the swap (the normal rhythm, for comparison).
     pub period: Duration,
+    /// Ticks seen on `topic` during the swap (each counted once, though both processes answer
+    /// during the overlap): what `steps_lost` and `steps_repeated` are counted over.
+    pub ticks_observed: u64,
     /// Lockstep: world steps missing from world/truth or from `topic` during the swap.
     pub steps_lost: u64,
-    /// Lockstep: world steps the world published twice during the swap.
+    /// Lockstep: steps handled twice during the swap: published twice on world/truth, or
+    /// twice on the output of a process that reads `topic` ([`consumer_outputs`]).
     pub steps_repeated: u64,
     /// The world's tick when the old process was gone.
     pub tick: u64,
@@ -91,16 +96,16 @@ pub fn check_swappable(role: &str) -> Result<(), SwapError> {
 
 /// Header stamps and ticks of one topic, read as they come.
 trait Watch {
-    fn poll(&mut self, stamps: &mut Vec<u64>, ticks: &mut Vec<u64>);
+    fn poll(&mut self, seen: &mut Seen);
 }
 
 struct TopicWatch<M: Message>(Subscriber<M>);
 
 impl<M: Message> Watch for TopicWatch<M> {
-    fn poll(&mut self, stamps: &mut Vec<u64>, ticks: &mut Vec<u64>) {
+    fn poll(&mut self, seen: &mut Seen) {
         self.0.drain(|m| {
-            stamps.push(m.header().stamp_ns);
-            ticks.push(m.header().tick);
+            seen.stamps.push(m.header().stamp_ns);
+            seen.ticks.push(m.header().tick);
         });
     }
 }
@@ -112,29 +117,64 @@ fn watch<M: Message>(ctx: &Context, topic: Topic<M>) -> Result<Box<dyn Watch>, S
     Ok(Box::new(TopicWatch(sub)))
 }
 
+/// A watcher of one of the topics a swap watches, by name.
+fn watch_topic(ctx: &Context, name: &str) -> Result<Box<dyn Watch>, SwapError> {
+    match name {
+        n if n == topics::SENSING_SCAN.name => watch(ctx, topics::SENSING_SCAN),
+        n if n == topics::LOCALIZATION_POSE.name => watch(ctx, topics::LOCALIZATION_POSE),
+        n if n == topics::MAPPING_GRID.name => watch(ctx, topics::MAPPING_GRID),
+        n if n == topics::PLANNING_CMD.name => watch(ctx, topics::PLANNING_CMD),
+        n if n == topics::WORLD_TRUTH.name => watch(ctx, topics::WORLD_TRUTH),
+        _ => Err(SwapError::Failed(format!(
+            "the launcher cannot watch `{name}`"
+        ))),
+    }
+}
+
 fn watch_output(ctx: &Context, role: &str) -> Result<(&'static str, Box<dyn Watch>), SwapError> {
-    let w = match role {
-        "sensing" => watch(ctx, topics::SENSING_SCAN)?,
-        "localization" => watch(ctx, topics::LOCALIZATION_POSE)?,
-        "mapping" => watch(ctx, topics::MAPPING_GRID)?,
-        "planning" => watch(ctx, topics::PLANNING_CMD)?,
-        _ => {
-            return Err(SwapError::Refused(format!(
-                "`{role}` has no output topic the launcher knows; swappable roles: sensing, \
-                 localization, mapping, planning"
-            )));
-        }
+    let Some(topic) = output_topic(role) else {
+        return Err(SwapError::Refused(format!(
+            "`{role}` has no output topic the launcher knows; swappable roles: sensing, \
+             localization, mapping, planning"
+        )));
     };
-    Ok((output_topic(role).unwrap_or("?"), w))
+    Ok((topic, watch_topic(ctx, topic)?))
+}
+
+/// What the processes that read `role`'s output publish once per handled step (the process
+/// table of docs/architecture.md), world/truth aside: every swap watches it, and the world reads
+/// planning/cmd, which every role's output leads to. A tick twice on one of these is a step a
+/// consumer handled twice.
+pub fn consumer_outputs(role: &str) -> &'static [&'static str] {
+    match role {
+        // Localization reads odometry, mapping and planning the scan and touch.
+        "sensing" => &[
+            topics::LOCALIZATION_POSE.name,
+            topics::MAPPING_GRID.name,
+            topics::PLANNING_CMD.name,
+        ],
+        "localization" => &[topics::MAPPING_GRID.name, topics::PLANNING_CMD.name],
+        "mapping" => &[topics::PLANNING_CMD.name],
+        // The world is planning's consumer: world/truth.
+        _ => &[],
+    }
+}
+
+/// Stamps and ticks of one watched topic, in arrival order.
+#[derive(Default)]
+struct Seen {
+    stamps: Vec<u64>,
+    ticks: Vec<u64>,
 }
 
 /// Everything the watchers saw.
 #[derive(Default)]
 struct Observed {
-    out_stamps: Vec<u64>,
-    out_ticks: Vec<u64>,
-    truth_stamps: Vec<u64>,
-    truth_ticks: Vec<u64>,
+    /// The swapped role's output: both processes answer while they overlap.
+    output: Seen,
+    truth: Seen,
+    /// The outputs of the role's consumers ([`consumer_outputs`]).
+    consumers: Vec<Seen>,
 }
 
 /// Replaces `role` by `spec` (same role, log and environment; new program, arguments and
@@ -148,10 +188,25 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
     };
     let (topic, mut out_watch) = watch_output(env.ctx, &role)?;
     let mut truth_watch = watch(env.ctx, topics::WORLD_TRUTH)?;
-    let mut seen = Observed::default();
+    // Only lockstep counts repeats: a realtime consumer handles the newest tick it has.
+    let consumers = match env.mode {
+        ClockMode::Lockstep => consumer_outputs(&role),
+        ClockMode::Realtime => &[],
+    };
+    let mut consumer_watches = consumers
+        .iter()
+        .map(|name| watch_topic(env.ctx, name))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut seen = Observed {
+        consumers: consumer_watches.iter().map(|_| Seen::default()).collect(),
+        ..Observed::default()
+    };
     let mut poll = |seen: &mut Observed| {
-        out_watch.poll(&mut seen.out_stamps, &mut seen.out_ticks);
-        truth_watch.poll(&mut seen.truth_stamps, &mut seen.truth_ticks);
+        out_watch.poll(&mut seen.output);
+        truth_watch.poll(&mut seen.truth);
+        for (w, consumer) in consumer_watches.iter_mut().zip(&mut seen.consumers) {
+            w.poll(consumer);
+        }
     };
 
     // Tells a stateful replacement (localization) to start from its predecessor's state.
@@ -215,7 +270,7 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
     if killed_old {
         cleanup_dead_nodes();
     }
-    let tick = seen.truth_ticks.last().copied().unwrap_or(0);
+    let tick = seen.truth.ticks.last().copied().unwrap_or(0);
     tracing::info!(role, pid, killed_old, "swap: the old process is gone");
 
     // 3. Watch a little longer, so a silence right after the old process left is measured.
@@ -227,10 +282,10 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
     }
     poll(&mut seen);
 
-    let (gap, period) = gap_and_period(&mut seen.out_stamps);
+    let (gap, period) = gap_and_period(&mut seen.output.stamps);
+    let ticks_observed = distinct(&seen.output.ticks);
     let (steps_lost, steps_repeated) = if env.mode == ClockMode::Lockstep {
-        let (truth_lost, repeated) = lost_and_repeated(&seen.truth_ticks);
-        (truth_lost + missing_ticks(&mut seen.out_ticks), repeated)
+        (steps_lost(&seen), steps_repeated(&seen))
     } else {
         (0, 0)
     };
@@ -241,6 +296,7 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
         topic,
         gap,
         period,
+        ticks_observed,
         steps_lost,
         steps_repeated,
         tick,
@@ -263,25 +319,43 @@ fn gap_and_period(stamps: &mut [u64]) -> (Duration, Duration) {
     (Duration::from_nanos(longest), Duration::from_nanos(median))
 }
 
-/// World ticks in arrival order: ticks skipped, and ticks published again.
-fn lost_and_repeated(ticks: &[u64]) -> (u64, u64) {
-    let (mut lost, mut repeated) = (0, 0);
-    for w in ticks.windows(2) {
-        if w[1] <= w[0] {
-            repeated += 1;
-        } else {
-            lost += w[1] - w[0] - 1;
-        }
-    }
-    (lost, repeated)
+/// Lockstep: world steps skipped on world/truth, and ticks missing between the first and last
+/// the role's output showed (it may show a tick twice: during the overlap both processes answer).
+fn steps_lost(seen: &Observed) -> u64 {
+    let truth_skipped: u64 = seen
+        .truth
+        .ticks
+        .windows(2)
+        .filter(|w| w[1] > w[0])
+        .map(|w| w[1] - w[0] - 1)
+        .sum();
+    let mut output = seen.output.ticks.clone();
+    output.sort_unstable();
+    output.dedup();
+    let output_missing: u64 = output.windows(2).map(|w| w[1] - w[0] - 1).sum();
+    truth_skipped + output_missing
 }
 
-/// Ticks between the first and last seen that never appeared (duplicates are fine: during the
-/// overlap both processes answer).
-fn missing_ticks(ticks: &mut Vec<u64>) -> u64 {
-    ticks.sort_unstable();
-    ticks.dedup();
-    ticks.windows(2).map(|w| w[1] - w[0] - 1).sum()
+/// Lockstep: steps handled twice: a world/truth tick that does not follow the one before (the
+/// world stepped back or published a step again), and every extra time a consumer published a
+/// tick. The role's own output is not looked at: its overlap duplicates are the make before
+/// break, not a repeat.
+fn steps_repeated(seen: &Observed) -> u64 {
+    let truth_again = seen.truth.ticks.windows(2).filter(|w| w[1] <= w[0]).count() as u64;
+    let consumers_again: u64 = seen
+        .consumers
+        .iter()
+        .map(|c| c.ticks.len() as u64 - distinct(&c.ticks))
+        .sum();
+    truth_again + consumers_again
+}
+
+/// How many different ticks `ticks` holds.
+fn distinct(ticks: &[u64]) -> u64 {
+    ticks
+        .iter()
+        .collect::<std::collections::BTreeSet<_>>()
+        .len() as u64
 }
 
 #[cfg(test)]
@@ -297,18 +371,54 @@ mod tests {
         assert_eq!(gap_and_period(&mut []), (Duration::ZERO, Duration::ZERO));
     }
 
-    #[test]
-    fn world_ticks_count_losses_and_repeats() {
-        assert_eq!(lost_and_repeated(&[1, 2, 3, 4]), (0, 0));
-        assert_eq!(lost_and_repeated(&[1, 2, 5, 6]), (2, 0));
-        assert_eq!(lost_and_repeated(&[1, 2, 2, 3]), (0, 1));
-        assert_eq!(lost_and_repeated(&[]), (0, 0));
+    /// What the watchers of a swap saw, by tick (the stamps do not matter here).
+    fn observed(output: &[u64], truth: &[u64], consumers: &[&[u64]]) -> Observed {
+        let seen = |ticks: &[u64]| Seen {
+            stamps: Vec::new(),
+            ticks: ticks.to_vec(),
+        };
+        Observed {
+            output: seen(output),
+            truth: seen(truth),
+            consumers: consumers.iter().map(|c| seen(c)).collect(),
+        }
     }
 
     #[test]
-    fn duplicate_outputs_are_not_missing_but_holes_are() {
-        assert_eq!(missing_ticks(&mut vec![4, 5, 5, 6, 6, 7]), 0);
-        assert_eq!(missing_ticks(&mut vec![4, 7, 5]), 1);
+    fn world_ticks_count_losses_and_repeats() {
+        let steady = observed(&[1, 2, 3, 4], &[1, 2, 3, 4], &[]);
+        assert_eq!((steps_lost(&steady), steps_repeated(&steady)), (0, 0));
+        let skipped = observed(&[1, 2, 5, 6], &[1, 2, 5, 6], &[]);
+        assert_eq!((steps_lost(&skipped), steps_repeated(&skipped)), (4, 0));
+        let again = observed(&[1, 2, 3], &[1, 2, 2, 3], &[]);
+        assert_eq!((steps_lost(&again), steps_repeated(&again)), (0, 1));
+        let nothing = observed(&[], &[], &[]);
+        assert_eq!((steps_lost(&nothing), steps_repeated(&nothing)), (0, 0));
+    }
+
+    #[test]
+    fn overlap_duplicates_of_the_output_are_neither_lost_nor_repeated_but_holes_are_lost() {
+        let overlap = observed(&[4, 5, 5, 6, 6, 7], &[4, 5, 6, 7], &[&[4, 5, 6, 7]]);
+        assert_eq!((steps_lost(&overlap), steps_repeated(&overlap)), (0, 0));
+        assert_eq!(distinct(&overlap.output.ticks), 4);
+        let hole = observed(&[4, 7, 5], &[4, 5, 6, 7], &[]);
+        assert_eq!(steps_lost(&hole), 1);
+    }
+
+    #[test]
+    fn a_consumer_that_handles_a_tick_twice_is_one_repeat() {
+        // A localization swap: both estimators publish poses 11 and 12; mapping handles every
+        // tick once, planning handles tick 11 twice (one command for each of the two poses).
+        let swap = observed(
+            &[10, 11, 11, 12, 12, 13],
+            &[10, 11, 12, 13, 14],
+            &[&[10, 11, 12, 13], &[10, 11, 11, 12, 13]],
+        );
+        assert_eq!(steps_repeated(&swap), 1);
+        assert_eq!(steps_lost(&swap), 0);
+        // A tick handled three times is two repeats.
+        let thrice = observed(&[10, 11, 12], &[10, 11, 12], &[&[10, 11, 11, 11, 12]]);
+        assert_eq!(steps_repeated(&thrice), 2);
     }
 
     #[test]

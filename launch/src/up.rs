@@ -624,14 +624,15 @@ fn swap_sentence(report: &SwapReport, mode: ClockMode) -> String {
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     let mut line = format!(
         "swapped `{}`: pid {} → {} at tick {}; {} silent for at most {:.1} ms (median interval \
-         {:.2} ms)",
+         {:.2} ms) over {} ticks",
         report.role,
         report.old_pid,
         report.pid,
         report.tick,
         report.topic,
         ms(report.gap),
-        ms(report.period)
+        ms(report.period),
+        report.ticks_observed
     );
     if mode == ClockMode::Lockstep {
         line.push_str(&format!(
@@ -655,6 +656,7 @@ fn swap_json(report: &SwapReport) -> serde_json::Value {
         "topic": report.topic,
         "gap_ms": report.gap.as_secs_f64() * 1e3,
         "median_interval_ms": report.period.as_secs_f64() * 1e3,
+        "ticks_observed": report.ticks_observed,
         "steps_lost": report.steps_lost,
         "steps_repeated": report.steps_repeated,
         "killed_old": report.killed_old,

@@ -4,11 +4,54 @@ use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_mole");
 
+/// The subcommands `mole ARGS --help` lists in its `Commands:` section: the first word of each
+/// entry (an entry starts two spaces in; a wrapped description further in).
+fn listed_subcommands(args: &[&str]) -> Vec<String> {
+    let output = Command::new(BIN)
+        .args(args)
+        .arg("--help")
+        .output()
+        .expect("run mole");
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "mole {args:?} --help: {text}");
+    text.lines()
+        .skip_while(|line| *line != "Commands:")
+        .skip(1)
+        .take_while(|line| !line.trim().is_empty())
+        .filter_map(|line| line.strip_prefix("  "))
+        .filter(|entry| !entry.starts_with(' '))
+        .filter_map(|entry| entry.split_whitespace().next())
+        .map(str::to_owned)
+        .collect()
+}
+
+/// `--help` lists every subcommand by name, and each one answers its own `--help`.
 #[test]
-fn help_lists_up() {
-    let output = Command::new(BIN).arg("--help").output().expect("run mole");
-    assert!(output.status.success());
-    assert!(String::from_utf8_lossy(&output.stdout).contains("up"));
+fn help_lists_every_subcommand() {
+    assert_eq!(
+        listed_subcommands(&[]),
+        ["up", "swap", "stop", "status", "top", "bench", "help"]
+    );
+    assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
+    for command in [
+        &["up"][..],
+        &["swap"],
+        &["stop"],
+        &["status"],
+        &["top"],
+        &["bench", "ipc"],
+        &["bench", "stack"],
+    ] {
+        let output = Command::new(BIN)
+            .args(command)
+            .arg("--help")
+            .output()
+            .expect("run mole");
+        let usage = format!("Usage: mole {}", command.join(" "));
+        let text = String::from_utf8_lossy(&output.stdout);
+        assert!(output.status.success(), "{command:?}: {text}");
+        assert!(text.contains(&usage), "{command:?} --help: {text}");
+    }
 }
 
 #[test]
