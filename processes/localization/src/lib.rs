@@ -1,4 +1,4 @@
-//! Localization: histogram Bayes filter, KF, EKF, PF (seed §6).
+//! Localization: histogram Bayes filter, KF, EKF, PF (algorithms §6).
 //!
 //! Every estimator implements [`Estimator`]: the process main calls `predict` with the odometry
 //! of a step, then `correct` with that step's beacon readings and position fix, then
@@ -11,11 +11,13 @@
 
 pub mod bayes;
 pub mod ekf;
+pub mod graph_slam;
 pub mod kalman;
 pub mod kf;
 pub mod models;
 pub mod noise;
 pub mod pf;
+pub mod slam;
 
 pub use bayes::{BayesConfig, HistogramFilter};
 pub use ekf::Ekf;
@@ -36,9 +38,9 @@ use thiserror::Error;
 pub trait Estimator {
     /// The estimator's id, `mole_types::ESTIMATOR_EKF` etc.
     fn id(&self) -> u32;
-    /// Prediction step (seed §6.3): moves the belief by the control u_t = (v, ω) over `odom.dt`.
+    /// Prediction step (algorithms §6.3): moves the belief by the control u_t = (v, ω) over `odom.dt`.
     fn predict(&mut self, odom: &Odom);
-    /// Correction step (seed §6.3): folds in this step's beacon readings and, when valid, the fix.
+    /// Correction step (algorithms §6.3): folds in this step's beacon readings and, when valid, the fix.
     fn correct(&mut self, beacons: &Beacons, fix: &Fix);
     /// The mean pose, θ wrapped to (−π, π].
     fn pose(&self) -> Pose2;
@@ -77,7 +79,8 @@ pub enum ReadingError {
     /// The reading names a beacon the map does not have.
     #[error("unknown beacon id {0}")]
     UnknownBeacon(u32),
-    /// A value is NaN or infinite, or out of its range (negative range or dt, unknown flag).
+    /// A value is NaN or infinite, or out of its range (negative range or dt, unknown flag,
+    /// odometry beyond `models::MAX_ODOM_SPEED`, `MAX_ODOM_TURN_RATE` or `MAX_ODOM_DT`).
     #[error("reading is not finite or out of range")]
     Invalid,
     /// The predicted beacon range is ~0, where the bearing is undefined.
@@ -120,21 +123,21 @@ pub enum LocalizationError {
     #[error("unknown estimator `{0}` (expected bayes, kf, ekf or pf)")]
     UnknownEstimator(String),
     /// The estimator exists in the design but not yet in this library (kept for callers that
-    /// match on it; every estimator of seed §6 is implemented now).
+    /// match on it; every estimator of algorithms §6 is implemented now).
     #[error("estimator `{0}` is not implemented yet")]
     NotImplemented(&'static str),
 }
 
-/// The four estimators of seed §6, as `--estimator` names them.
+/// The four estimators of algorithms §6, as `--estimator` names them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum EstimatorKind {
-    /// Histogram Bayes filter (seed §6.3).
+    /// Histogram Bayes filter (algorithms §6.3).
     Bayes,
-    /// Linear Kalman filter (seed §6.5).
+    /// Linear Kalman filter (algorithms §6.5).
     Kf,
-    /// Extended Kalman filter (seed §6.6).
+    /// Extended Kalman filter (algorithms §6.6).
     Ekf,
-    /// Particle filter (seed §6.7).
+    /// Particle filter (algorithms §6.7).
     Pf,
 }
 

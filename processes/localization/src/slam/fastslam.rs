@@ -1,0 +1,609 @@
+//! FastSLAM 1.0 (Thrun et al. 2005 §13.3, Montemerlo et al. 2002): particles that each carry a
+//! pose and a small EKF (2-D mean, 2×2 covariance) per landmark, in arrays preallocated for
+//! `capacity` landmarks per particle and double-buffered for resampling.
+
+use super::{
+    Association, AssociationStats, Correspondence, Gates, Landmark, SlamConfig, SlamError,
+    SlotTable, checked_reading, inverse_range_bearing, observe,
+};
+use crate::kalman::kalman_correct;
+use crate::models::{odometry_is_plausible, unicycle_g, wrap_near};
+use crate::noise::NoiseModel;
+use crate::pf::{low_variance_resample, normalise_log_weights};
+use mole_types::{BeaconReading, Pose2, wrap_angle};
+use nalgebra::{Cholesky, Matrix2, Matrix3, Vector2, Vector3};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+/// Mixed into the seed so FastSLAM's stream differs from the localiser PF's.
+const FASTSLAM_SEED_SALT: u64 = 0xFA57_51A3_0000_0013;
+
+/// Tuning of a [`FastSlam`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FastSlamConfig {
+    /// M, the number of particles (≥ 1).
+    pub n_particles: usize,
+    /// Resample when N_eff < `resample_threshold` · M.
+    pub resample_threshold: f64,
+    /// Seed of the ChaCha stream that draws the motion noise and the resampling offsets.
+    pub seed: u64,
+}
+
+impl Default for FastSlamConfig {
+    fn default() -> Self {
+        Self {
+            n_particles: 100,
+            resample_threshold: 0.5,
+            seed: 0,
+        }
+    }
+}
+
+/// The particle set, struct-of-arrays; landmark k of particle j sits at j·capacity + k.
+#[derive(Debug, Clone)]
+struct Particles {
+    pose: Vec<Vector3<f64>>,
+    /// Landmarks each particle has (equal across particles with known correspondences).
+    count: Vec<usize>,
+    lm_mean: Vec<Vector2<f64>>,
+    lm_cov: Vec<Matrix2<f64>>,
+    lm_id: Vec<u32>,
+}
+
+impl Particles {
+    /// `n` particles at `pose` with room for `capacity` landmarks each.
+    fn new(n: usize, capacity: usize, pose: Vector3<f64>) -> Self {
+        Self {
+            pose: vec![pose; n],
+            count: vec![0; n],
+            lm_mean: vec![Vector2::zeros(); n * capacity],
+            lm_cov: vec![Matrix2::zeros(); n * capacity],
+            lm_id: vec![0; n * capacity],
+        }
+    }
+}
+
+/// FastSLAM 1.0 with known or unknown correspondences (Thrun §13.3, Tables 13.1 and 13.2).
+#[derive(Debug, Clone)]
+pub struct FastSlam {
+    /// Odometry noise (the proposal) and Q_t of the readings.
+    pub noise: NoiseModel,
+    config: SlamConfig,
+    gates: Gates,
+    resample_threshold: f64,
+    capacity: usize,
+    set: Particles,
+    next: Particles,
+    /// ln w, normalised after each correction.
+    log_w: Vec<f64>,
+    w: Vec<f64>,
+    picks: Vec<usize>,
+    rng: ChaCha8Rng,
+    /// Known correspondences: id → slot, shared by all particles (they all meet a landmark at
+    /// the same reading).
+    slots: SlotTable,
+    mean: Vector3<f64>,
+    cov: Matrix3<f64>,
+    best: usize,
+    n_eff: f64,
+    stats: AssociationStats,
+    resamples: u64,
+    rejected: u64,
+    ignored: u64,
+}
+
+/// One standard normal draw.
+#[inline]
+fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    rng.sample(StandardNormal)
+}
+
+/// ln N(ν; 0, S) from νᵀ S⁻¹ ν and det S, the importance factor of Thrun Table 13.1 line 18.
+#[inline]
+fn log_gaussian(d2: f64, det_s: f64) -> f64 {
+    -0.5 * d2 - (core::f64::consts::TAU).ln() - 0.5 * det_s.ln()
+}
+
+impl FastSlam {
+    /// M particles at `pose` (the map frame is the start pose, so all start there), each with
+    /// room for `capacity` landmarks; all memory is allocated here.
+    pub fn new(
+        pose: Pose2,
+        noise: NoiseModel,
+        capacity: usize,
+        config: SlamConfig,
+        fast: FastSlamConfig,
+    ) -> Self {
+        let n = fast.n_particles.max(1);
+        let fin = |v: f64| if v.is_finite() { v } else { 0.0 };
+        let start = Vector3::new(fin(pose.x), fin(pose.y), wrap_angle(fin(pose.theta)));
+        let threshold = if fast.resample_threshold.is_finite() {
+            fast.resample_threshold.clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+        Self {
+            noise,
+            gates: Gates::new(&config),
+            config,
+            resample_threshold: threshold,
+            capacity,
+            set: Particles::new(n, capacity, start),
+            next: Particles::new(n, capacity, start),
+            log_w: vec![-(n as f64).ln(); n],
+            w: vec![1.0 / n as f64; n],
+            picks: vec![0; n],
+            rng: ChaCha8Rng::seed_from_u64(fast.seed ^ FASTSLAM_SEED_SALT),
+            slots: SlotTable::with_capacity(capacity),
+            mean: start,
+            cov: Matrix3::zeros(),
+            best: 0,
+            n_eff: n as f64,
+            stats: AssociationStats::default(),
+            resamples: 0,
+            rejected: 0,
+            ignored: 0,
+        }
+    }
+
+    /// M, the number of particles.
+    pub fn len(&self) -> usize {
+        self.w.len()
+    }
+
+    /// Whether the set is empty (never: M ≥ 1).
+    pub fn is_empty(&self) -> bool {
+        self.w.is_empty()
+    }
+
+    /// Normalised weights.
+    pub fn weights(&self) -> &[f64] {
+        &self.w
+    }
+
+    /// N_eff = 1/Σw² after the last correction (before the resampling it triggered).
+    pub fn n_eff(&self) -> f64 {
+        self.n_eff
+    }
+
+    /// How many times the set was resampled.
+    pub fn resamples(&self) -> u64 {
+        self.resamples
+    }
+
+    /// Association decisions of the most likely particle so far.
+    pub fn association_stats(&self) -> AssociationStats {
+        self.stats
+    }
+
+    /// Known correspondences: readings refused by the outlier gate so far.
+    pub fn rejected(&self) -> u64 {
+        self.rejected
+    }
+
+    /// Inputs ignored so far: non-finite or implausible controls and readings, a full map.
+    pub fn ignored(&self) -> u64 {
+        self.ignored
+    }
+
+    /// The weighted mean pose, θ the circular mean (atan2 of the weighted mean sin and cos).
+    pub fn pose(&self) -> Pose2 {
+        Pose2::new(self.mean[0], self.mean[1], self.mean[2])
+    }
+
+    /// The weighted covariance of the particle poses (θ deviations wrapped).
+    pub fn pose_covariance(&self) -> Matrix3<f64> {
+        self.cov
+    }
+
+    /// The map. Known correspondences: per landmark the moments of the particles' mixture,
+    /// mean Σ wⱼ μⱼ and covariance Σ wⱼ (Σⱼ + (μⱼ − μ)(μⱼ − μ)ᵀ) (Thrun §13.3 leaves the choice
+    /// open; the mixture uses every particle, where one particle's map carries its path's
+    /// error). Unknown correspondences: the map of the most likely particle at the last
+    /// correction (Montemerlo et al. 2002), as slots need not agree across particles.
+    pub fn landmarks(&self) -> impl Iterator<Item = Landmark> + '_ {
+        let known = self.config.correspondence == Correspondence::Known;
+        let cap = self.capacity;
+        let best = self.best;
+        (0..self.set.count[best]).map(move |slot| {
+            let i = best * cap + slot;
+            if !known {
+                return Landmark {
+                    id: self.set.lm_id[i],
+                    mean: self.set.lm_mean[i],
+                    cov: self.set.lm_cov[i],
+                };
+            }
+            let mut mean = Vector2::zeros();
+            for (j, w) in self.w.iter().enumerate() {
+                mean += self.set.lm_mean[j * cap + slot] * *w;
+            }
+            let mut cov = Matrix2::zeros();
+            for (j, w) in self.w.iter().enumerate() {
+                let e = self.set.lm_mean[j * cap + slot] - mean;
+                cov += (self.set.lm_cov[j * cap + slot] + e * e.transpose()) * *w;
+            }
+            Landmark {
+                id: self.set.lm_id[i],
+                mean,
+                cov,
+            }
+        })
+    }
+
+    /// Sampling the proposal (Thrun §13.3, Table 13.1 line 4): every particle moves along the
+    /// unicycle arc with its own draw of the odometry noise v + σ_v·n, ω + σ_ω·n, plus the
+    /// additive floor of the noise model. A non-finite or implausible control is ignored (and
+    /// counted); dt = 0 changes nothing.
+    pub fn predict(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), SlamError> {
+        if !odometry_is_plausible(v, omega, dt) {
+            self.ignored += 1;
+            return Err(SlamError::Invalid);
+        }
+        if dt == 0.0 {
+            return Ok(());
+        }
+        let (sv, sw) = (self.noise.odom_v_std, self.noise.odom_omega_std);
+        let floor = self.noise.r_floor(dt);
+        let floor_std = Vector3::new(
+            floor[(0, 0)].sqrt(),
+            floor[(1, 1)].sqrt(),
+            floor[(2, 2)].sqrt(),
+        );
+        for pose in self.set.pose.iter_mut() {
+            let vj = v + sv * gauss(&mut self.rng);
+            let wj = omega + sw * gauss(&mut self.rng);
+            let mut moved = unicycle_g(pose, vj, wj, dt);
+            for k in 0..3 {
+                moved[k] += floor_std[k] * gauss(&mut self.rng);
+            }
+            moved[2] = wrap_near(moved[2]);
+            *pose = moved;
+        }
+        self.summarise();
+        Ok(())
+    }
+
+    /// Correction with every reading (importance weights in log space), then normalisation and
+    /// low-variance resampling when N_eff < threshold · M (Thrun §13.3, Table 13.1 lines 5–27).
+    pub fn correct(&mut self, readings: &[BeaconReading]) {
+        for reading in readings {
+            // Refusals are counted inside.
+            let _ = self.correct_reading(reading);
+        }
+        self.finish_correction();
+    }
+
+    /// Ends a correction made reading by reading with [`FastSlam::correct_reading`]: normalises
+    /// the weights, updates the estimate, and resamples when N_eff < threshold · M.
+    pub fn finish_correction(&mut self) {
+        self.normalise();
+        self.summarise();
+        if self.n_eff < self.resample_threshold * self.len() as f64 {
+            self.resample();
+        }
+    }
+
+    /// One reading into every particle: the landmark EKF update and the importance factor
+    /// w ∝ N(ν; 0, H Σ Hᵀ + Q_t) (Thrun Table 13.1 lines 12–18), or initialisation on first
+    /// sight. Weights are not normalised here: call [`FastSlam::finish_correction`] after the
+    /// step's last reading ([`FastSlam::correct`] does both). Returns the
+    /// decision of the most likely particle.
+    pub fn correct_reading(&mut self, reading: &BeaconReading) -> Result<Association, SlamError> {
+        let result = self.try_correct_reading(reading);
+        match &result {
+            Ok(a) => self.stats.count(*a),
+            Err(e) if e.is_rejection() => self.rejected += 1,
+            Err(_) => self.ignored += 1,
+        }
+        result
+    }
+
+    fn try_correct_reading(&mut self, reading: &BeaconReading) -> Result<Association, SlamError> {
+        let z = checked_reading(reading.range, reading.bearing, self.config.max_range)
+            .ok_or(SlamError::Invalid)?;
+        if z[0] < crate::models::MIN_RANGE {
+            return Err(SlamError::TooClose);
+        }
+        let best = self.most_likely_particle();
+        match self.config.correspondence {
+            Correspondence::Known => match self.slots.get(reading.id) {
+                Some(slot) => self.update_known(slot, reading.id, &z, best),
+                None => {
+                    let slot = self.slots_in_use();
+                    if slot == self.capacity || !self.slots.insert(reading.id, slot) {
+                        return Err(SlamError::MapFull);
+                    }
+                    // Every particle founds it; w·p₀ is the same for all, so no weight change.
+                    for j in 0..self.len() {
+                        self.found(j, reading.id, &z);
+                    }
+                    Ok(Association::New {
+                        slot,
+                        id: reading.id,
+                    })
+                }
+            },
+            Correspondence::Unknown => {
+                let mut decision = Err(SlamError::MapFull);
+                for j in 0..self.len() {
+                    let a = self.associate_particle(j, reading.id, &z);
+                    if j == best {
+                        decision = a;
+                    }
+                }
+                decision
+            }
+        }
+    }
+
+    /// Known correspondences: refused for every particle when the most likely particle finds
+    /// the reading beyond the outlier gate, else every particle's landmark EKF takes it.
+    fn update_known(
+        &mut self,
+        slot: usize,
+        id: u32,
+        z: &Vector2<f64>,
+        best: usize,
+    ) -> Result<Association, SlamError> {
+        let (d2, _) = self
+            .landmark_likelihood(best, slot, z)
+            .ok_or(SlamError::TooClose)?;
+        if d2 > self.gates.outlier {
+            return Err(SlamError::Outlier {
+                mahalanobis2: d2,
+                gate: self.gates.outlier,
+            });
+        }
+        for j in 0..self.len() {
+            self.update_particle(j, slot, z);
+        }
+        Ok(Association::Matched { slot, id })
+    }
+
+    /// Unknown correspondences for particle j (Thrun §13.5, Table 13.2, with two gates): the
+    /// maximum-likelihood landmark inside the association gate is updated; a reading beyond the
+    /// creation gate of every landmark founds one; in between it is discarded. Both founding
+    /// and discarding weigh the particle by p₀ = N at the association gate under Q_t alone.
+    fn associate_particle(
+        &mut self,
+        j: usize,
+        id: u32,
+        z: &Vector2<f64>,
+    ) -> Result<Association, SlamError> {
+        let (mut best, mut best_score, mut min_d2) = (None, f64::INFINITY, f64::INFINITY);
+        for slot in 0..self.set.count[j] {
+            if let Some((d2, det_s)) = self.landmark_likelihood(j, slot, z) {
+                min_d2 = min_d2.min(d2);
+                let score = d2 + det_s.ln();
+                if d2 <= self.gates.associate && score < best_score {
+                    (best, best_score) = (Some(slot), score);
+                }
+            }
+        }
+        if let Some(slot) = best {
+            self.update_particle(j, slot, z);
+            return Ok(Association::Matched {
+                slot,
+                id: self.set.lm_id[j * self.capacity + slot],
+            });
+        }
+        self.log_w[j] += log_gaussian(self.gates.associate, self.noise.q_beacon().determinant());
+        if min_d2 <= self.gates.create {
+            return Ok(Association::Discarded);
+        }
+        if self.set.count[j] == self.capacity {
+            return Err(SlamError::MapFull);
+        }
+        let slot = self.found(j, id, z);
+        Ok(Association::New { slot, id })
+    }
+
+    /// (νᵀ S⁻¹ ν, det S) of a reading of landmark `slot` in particle j, S = H Σ Hᵀ + Q_t.
+    fn landmark_likelihood(&self, j: usize, slot: usize, z: &Vector2<f64>) -> Option<(f64, f64)> {
+        let i = j * self.capacity + slot;
+        let (z_hat, _, h_m) = observe(&self.set.pose[j], &self.set.lm_mean[i])?;
+        let s_t = h_m * self.set.lm_cov[i] * h_m.transpose() + self.noise.q_beacon();
+        let nu = Vector2::new(z[0] - z_hat[0], wrap_angle(z[1] - z_hat[1]));
+        let chol = Cholesky::new(s_t)?;
+        Some((nu.dot(&chol.solve(&nu)), s_t.determinant()))
+    }
+
+    /// The landmark EKF update of particle j (Thrun Table 13.1 lines 12–17, the crate's
+    /// Joseph-form [`kalman_correct`]) and its importance factor ln N(ν; 0, S) (line 18). A
+    /// particle whose landmark is too close or degenerate gets weight 0.
+    fn update_particle(&mut self, j: usize, slot: usize, z: &Vector2<f64>) {
+        let i = j * self.capacity + slot;
+        let Some((z_hat, _, h_m)) = observe(&self.set.pose[j], &self.set.lm_mean[i]) else {
+            self.log_w[j] = f64::NEG_INFINITY;
+            return;
+        };
+        let q_t = self.noise.q_beacon();
+        let nu = Vector2::new(z[0] - z_hat[0], wrap_angle(z[1] - z_hat[1]));
+        let det_s = (h_m * self.set.lm_cov[i] * h_m.transpose() + q_t).determinant();
+        match kalman_correct(
+            &mut self.set.lm_mean[i],
+            &mut self.set.lm_cov[i],
+            &nu,
+            &h_m,
+            &q_t,
+            None,
+        ) {
+            Ok(d2) => self.log_w[j] += log_gaussian(d2, det_s),
+            Err(_) => self.log_w[j] = f64::NEG_INFINITY,
+        }
+    }
+
+    /// Founds a landmark in particle j from reading z (Thrun Table 13.1 lines 7–10): mean from
+    /// the inverse observation model, Σ = J_z Q_t J_zᵀ (= H⁻¹ Q_t H⁻ᵀ). Returns its slot.
+    fn found(&mut self, j: usize, id: u32, z: &Vector2<f64>) -> usize {
+        let slot = self.set.count[j];
+        let i = j * self.capacity + slot;
+        let (m, _, j_z) = inverse_range_bearing(&self.set.pose[j], z);
+        self.set.lm_mean[i] = m;
+        self.set.lm_cov[i] = j_z * self.noise.q_beacon() * j_z.transpose();
+        self.set.lm_id[i] = id;
+        self.set.count[j] += 1;
+        slot
+    }
+
+    /// Landmark slots in use with known correspondences (the same in every particle).
+    fn slots_in_use(&self) -> usize {
+        self.set.count[0]
+    }
+
+    /// The particle with the largest ln w.
+    fn most_likely_particle(&self) -> usize {
+        let mut best = 0;
+        for (j, l) in self.log_w.iter().enumerate() {
+            if *l > self.log_w[best] {
+                best = j;
+            }
+        }
+        best
+    }
+
+    /// Normalises by log-sum-exp and computes N_eff = 1/Σw²; all-impossible sets (every ln w
+    /// −∞ or NaN) are reset to uniform.
+    fn normalise(&mut self) {
+        self.n_eff = normalise_log_weights(&mut self.log_w, &mut self.w);
+    }
+
+    /// Low-variance resampling (Thrun Table 4.4, [`low_variance_resample`]) into the second
+    /// buffer, each particle's pose and landmark EKFs copied; weights become uniform.
+    fn resample(&mut self) {
+        let n = self.len();
+        let r = self.rng.random::<f64>() / n as f64;
+        low_variance_resample(&self.w, r, &mut self.picks);
+        let cap = self.capacity;
+        for (m, &i) in self.picks.iter().enumerate() {
+            let k = self.set.count[i];
+            self.next.pose[m] = self.set.pose[i];
+            self.next.count[m] = k;
+            let (src, dst) = (i * cap..i * cap + k, m * cap..m * cap + k);
+            self.next.lm_mean[dst.clone()].copy_from_slice(&self.set.lm_mean[src.clone()]);
+            self.next.lm_cov[dst.clone()].copy_from_slice(&self.set.lm_cov[src.clone()]);
+            self.next.lm_id[dst].copy_from_slice(&self.set.lm_id[src]);
+        }
+        core::mem::swap(&mut self.set, &mut self.next);
+        // The best particle's first copy (it has one: its weight is at least 1/M).
+        self.best = self.picks.iter().position(|&i| i == self.best).unwrap_or(0);
+        self.log_w.fill(-(n as f64).ln());
+        self.w.fill(1.0 / n as f64);
+        self.resamples += 1;
+    }
+
+    /// Weighted mean (circular mean for θ), covariance (θ deviations wrapped) and the most
+    /// likely particle.
+    fn summarise(&mut self) {
+        let (mut sx, mut sy, mut sc, mut ss) = (0.0, 0.0, 0.0, 0.0);
+        for (p, &w) in self.set.pose.iter().zip(self.w.iter()) {
+            sx += w * p[0];
+            sy += w * p[1];
+            let (s, c) = p[2].sin_cos();
+            sc += w * c;
+            ss += w * s;
+        }
+        let mt = if sc == 0.0 && ss == 0.0 {
+            0.0
+        } else {
+            ss.atan2(sc)
+        };
+        let mean = Vector3::new(sx, sy, wrap_angle(mt));
+        let mut cov = Matrix3::zeros();
+        for (p, &w) in self.set.pose.iter().zip(self.w.iter()) {
+            let e = Vector3::new(p[0] - sx, p[1] - sy, wrap_near(p[2] - mt));
+            cov += e * e.transpose() * w;
+        }
+        self.mean = mean;
+        self.cov = cov;
+        self.best = self.most_likely_particle();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reading(id: u32, range: f64, bearing: f64) -> BeaconReading {
+        BeaconReading {
+            id,
+            _pad: 0,
+            range,
+            bearing,
+        }
+    }
+
+    fn fast(correspondence: Correspondence, seed: u64) -> FastSlam {
+        FastSlam::new(
+            Pose2::new(0.0, 0.0, 0.0),
+            NoiseModel::new(0.1, 0.05, 0.1, 0.02, 0.5),
+            3,
+            SlamConfig {
+                correspondence,
+                ..SlamConfig::default()
+            },
+            FastSlamConfig {
+                n_particles: 50,
+                seed,
+                ..FastSlamConfig::default()
+            },
+        )
+    }
+
+    #[test]
+    fn the_same_seed_reproduces_the_run_and_another_seed_does_not() {
+        let run = |seed| {
+            let mut f = fast(Correspondence::Known, seed);
+            for k in 0..20 {
+                f.predict(1.0, 0.1, 0.1).unwrap();
+                f.correct(&[reading(0, 5.0 - 0.1 * f64::from(k), 0.3)]);
+            }
+            (f.pose(), f.landmarks().next())
+        };
+        assert_eq!(run(3), run(3));
+        assert_ne!(run(3).0, run(4).0);
+    }
+
+    #[test]
+    fn a_landmark_ekf_starts_at_the_inverse_model_with_sensor_covariance() {
+        let mut f = fast(Correspondence::Known, 1);
+        f.correct(&[reading(4, 2.0, core::f64::consts::FRAC_PI_2)]);
+        let lm = f.landmarks().next().unwrap();
+        assert_eq!(lm.id, 4);
+        approx::assert_relative_eq!(lm.mean, Vector2::new(0.0, 2.0), epsilon = 1e-12);
+        // Range σ 0.1 along y, bearing σ 0.02 rad · 2 m across, along x.
+        approx::assert_relative_eq!(
+            lm.cov,
+            Matrix2::new(0.04 * 0.04, 0.0, 0.0, 0.01),
+            epsilon = 1e-12
+        );
+    }
+
+    #[test]
+    fn unknown_correspondences_match_found_and_discard() {
+        let mut f = fast(Correspondence::Unknown, 1);
+        assert!(matches!(
+            f.correct_reading(&reading(9, 3.0, 0.0)),
+            Ok(Association::New { slot: 0, id: 9 })
+        ));
+        // The same place again (any id): matched.
+        assert!(matches!(
+            f.correct_reading(&reading(1, 3.02, 0.001)),
+            Ok(Association::Matched { slot: 0, id: 9 })
+        ));
+        // 0.44 m beyond it, S_rr ≈ 0.015: d² ≈ 13, between the gates (9.2, 18.4): discarded.
+        assert_eq!(
+            f.correct_reading(&reading(2, 3.45, 0.0)),
+            Ok(Association::Discarded)
+        );
+        // Far away: a new landmark.
+        assert!(matches!(
+            f.correct_reading(&reading(5, 3.0, 1.5)),
+            Ok(Association::New { slot: 1, id: 5 })
+        ));
+        let s = f.association_stats();
+        assert_eq!((s.matched, s.created, s.discarded), (1, 2, 1));
+    }
+}
