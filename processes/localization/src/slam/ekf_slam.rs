@@ -3,7 +3,7 @@
 
 use super::{
     Association, AssociationStats, Correspondence, Gates, Landmark, SlamConfig, SlamError,
-    SlotTable, checked_reading, covariance_intersection, inverse_range_bearing, observe,
+    SlotTable, Tally, checked_reading, covariance_intersection, inverse_range_bearing, observe,
 };
 use crate::kalman::symmetrize;
 use crate::models::{odometry_is_plausible, unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v};
@@ -95,9 +95,7 @@ pub struct EkfSlam<M: MotionModel = UnicycleMotion> {
     n: usize,
     ids: Vec<u32>,
     slots: SlotTable,
-    stats: AssociationStats,
-    rejected: u64,
-    ignored: u64,
+    tally: Tally,
 }
 
 /// Offset of landmark `slot` in the state vector.
@@ -166,9 +164,7 @@ impl<M: MotionModel> EkfSlam<M> {
             n: 0,
             ids: Vec::with_capacity(capacity),
             slots: SlotTable::with_capacity(capacity),
-            stats: AssociationStats::default(),
-            rejected: 0,
-            ignored: 0,
+            tally: Tally::default(),
         }
     }
 
@@ -227,17 +223,17 @@ impl<M: MotionModel> EkfSlam<M> {
 
     /// Association decisions so far.
     pub fn association_stats(&self) -> AssociationStats {
-        self.stats
+        self.tally.stats
     }
 
     /// Known correspondences: readings refused by the outlier gate so far.
     pub fn rejected(&self) -> u64 {
-        self.rejected
+        self.tally.rejected
     }
 
     /// Inputs ignored so far: non-finite or implausible controls and readings, a full map.
     pub fn ignored(&self) -> u64 {
-        self.ignored
+        self.tally.ignored
     }
 
     /// Prediction (Thrun §10.2, Table 10.1 lines 2–5): the pose moves by g, Σₓₓ ← G Σₓₓ Gᵀ +
@@ -245,7 +241,7 @@ impl<M: MotionModel> EkfSlam<M> {
     /// implausible control is ignored (and counted); dt = 0 changes nothing.
     pub fn predict(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), SlamError> {
         if !odometry_is_plausible(v, omega, dt) {
-            self.ignored += 1;
+            self.tally.ignored += 1;
             return Err(SlamError::Invalid);
         }
         if dt == 0.0 {
@@ -259,7 +255,7 @@ impl<M: MotionModel> EkfSlam<M> {
             && g_t.iter().all(|v| v.is_finite())
             && r_t.iter().all(|v| v.is_finite()))
         {
-            self.ignored += 1;
+            self.tally.ignored += 1;
             return Err(SlamError::Invalid);
         }
         self.mu[0] = moved[0];
@@ -292,11 +288,7 @@ impl<M: MotionModel> EkfSlam<M> {
     /// correspondences Table 10.3): association, first-sight initialisation, or the update.
     pub fn correct_reading(&mut self, reading: &BeaconReading) -> Result<Association, SlamError> {
         let result = self.try_correct_reading(reading);
-        match &result {
-            Ok(a) => self.stats.count(*a),
-            Err(e) if e.is_rejection() => self.rejected += 1,
-            Err(_) => self.ignored += 1,
-        }
+        self.tally.record(&result);
         result
     }
 

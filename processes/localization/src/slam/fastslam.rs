@@ -4,7 +4,7 @@
 
 use super::{
     Association, AssociationStats, Correspondence, Gates, Landmark, SlamConfig, SlamError,
-    SlotTable, checked_reading, inverse_range_bearing, observe,
+    SlotTable, Tally, checked_reading, inverse_range_bearing, observe,
 };
 use crate::kalman::kalman_correct;
 use crate::models::{odometry_is_plausible, unicycle_g, wrap_near};
@@ -87,10 +87,8 @@ pub struct FastSlam {
     cov: Matrix3<f64>,
     best: usize,
     n_eff: f64,
-    stats: AssociationStats,
+    tally: Tally,
     resamples: u64,
-    rejected: u64,
-    ignored: u64,
 }
 
 /// One standard normal draw.
@@ -140,10 +138,8 @@ impl FastSlam {
             cov: Matrix3::zeros(),
             best: 0,
             n_eff: n as f64,
-            stats: AssociationStats::default(),
+            tally: Tally::default(),
             resamples: 0,
-            rejected: 0,
-            ignored: 0,
         }
     }
 
@@ -174,17 +170,17 @@ impl FastSlam {
 
     /// Association decisions of the most likely particle so far.
     pub fn association_stats(&self) -> AssociationStats {
-        self.stats
+        self.tally.stats
     }
 
     /// Known correspondences: readings refused by the outlier gate so far.
     pub fn rejected(&self) -> u64 {
-        self.rejected
+        self.tally.rejected
     }
 
     /// Inputs ignored so far: non-finite or implausible controls and readings, a full map.
     pub fn ignored(&self) -> u64 {
-        self.ignored
+        self.tally.ignored
     }
 
     /// The weighted mean pose, θ the circular mean (atan2 of the weighted mean sin and cos).
@@ -238,7 +234,7 @@ impl FastSlam {
     /// counted); dt = 0 changes nothing.
     pub fn predict(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), SlamError> {
         if !odometry_is_plausible(v, omega, dt) {
-            self.ignored += 1;
+            self.tally.ignored += 1;
             return Err(SlamError::Invalid);
         }
         if dt == 0.0 {
@@ -292,11 +288,7 @@ impl FastSlam {
     /// decision of the most likely particle.
     pub fn correct_reading(&mut self, reading: &BeaconReading) -> Result<Association, SlamError> {
         let result = self.try_correct_reading(reading);
-        match &result {
-            Ok(a) => self.stats.count(*a),
-            Err(e) if e.is_rejection() => self.rejected += 1,
-            Err(_) => self.ignored += 1,
-        }
+        self.tally.record(&result);
         result
     }
 

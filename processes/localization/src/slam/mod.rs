@@ -158,6 +158,26 @@ impl AssociationStats {
     }
 }
 
+/// What a SLAM filter did with its inputs: association decisions, readings refused by a gate,
+/// and inputs ignored as unusable.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Tally {
+    pub stats: AssociationStats,
+    pub rejected: u64,
+    pub ignored: u64,
+}
+
+impl Tally {
+    /// Counts the outcome of one reading.
+    pub(crate) fn record(&mut self, outcome: &Result<Association, SlamError>) {
+        match outcome {
+            Ok(a) => self.stats.count(*a),
+            Err(e) if e.is_rejection() => self.rejected += 1,
+            Err(_) => self.ignored += 1,
+        }
+    }
+}
+
 /// Why a reading or a control was not used.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
 pub enum SlamError {
