@@ -11,6 +11,10 @@ use mole_localization::{
 use mole_types::{BeaconReading, BeaconSite, Beacons, Fix, Odom, Particles, Pose, WorldMap};
 use proptest::prelude::*;
 
+#[path = "common/garbage.rs"]
+mod garbage_values;
+use garbage_values::any_f64;
+
 fn map() -> Box<WorldMap> {
     let mut m: Box<WorldMap> = bytemuck::zeroed_box();
     m.arena_width = 4.0;
@@ -60,21 +64,6 @@ fn coarse_histogram(map: &WorldMap) -> HistogramFilter {
             ..Default::default()
         },
     )
-}
-
-fn any_f64() -> impl Strategy<Value = f64> {
-    prop_oneof![
-        -10.0..10.0f64,
-        Just(f64::NAN),
-        Just(f64::INFINITY),
-        Just(f64::NEG_INFINITY),
-        Just(0.0),
-        Just(-0.0),
-        Just(1e300),
-        Just(-1e300),
-        Just(1e6),
-        Just(f64::MIN_POSITIVE),
-    ]
 }
 
 #[derive(Debug, Clone)]

@@ -10,20 +10,9 @@ use mole_types::{BeaconReading, Pose2};
 use nalgebra::Matrix3;
 use proptest::prelude::*;
 
-fn any_f64() -> impl Strategy<Value = f64> {
-    prop_oneof![
-        -10.0..10.0f64,
-        Just(f64::NAN),
-        Just(f64::INFINITY),
-        Just(f64::NEG_INFINITY),
-        Just(0.0),
-        Just(-0.0),
-        Just(1e300),
-        Just(-1e300),
-        Just(1e9),
-        Just(f64::MIN_POSITIVE),
-    ]
-}
+#[path = "common/garbage.rs"]
+mod garbage_values;
+use garbage_values::any_f64;
 
 #[derive(Debug, Clone)]
 enum Op {
