@@ -207,7 +207,12 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
         (None, Some(d)) => (d / scenario.dt).round().max(1.0) as u64,
         (None, None) => u64::MAX,
     };
-    let mode: ClockMode = launch.stack.mode.as_str().parse().map_err(Failure::input)?;
+    let mode: ClockMode = launch
+        .stack
+        .mode
+        .as_str()
+        .parse()
+        .map_err(|e: mole_types::UnknownChoice| Failure::input(e.to_string()))?;
     let seed = args.seed.unwrap_or(launch.stack.seed);
 
     let live: Vec<String> = live_nodes_in_namespace(&args.namespace)

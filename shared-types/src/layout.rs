@@ -156,13 +156,27 @@ pub fn markdown() -> String {
 /// A constant of `messages.rs` that other languages need (capacities, flags, mode codes).
 macro_rules! constants {
     ($($c:ident),+ $(,)?) => {
-        vec![$((stringify!($c), $c as u64)),+]
+        vec![$((stringify!($c).to_owned(), $c as u64)),+]
     };
 }
 
-/// Every `pub const` of `messages.rs`, by name (a test checks that none is missing).
-fn constants() -> Vec<(&'static str, u64)> {
-    constants![
+/// The wire codes of a choice (`crate::kinds`), named `PREFIX_NAME` (`ESTIMATOR_EKF_SLAM`).
+fn choice_codes(prefix: &str, names: &[&str], code: impl Fn(usize) -> u32) -> Vec<(String, u64)> {
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let name = name.replace('-', "_").to_ascii_uppercase();
+            (format!("{prefix}_{name}"), u64::from(code(i)))
+        })
+        .collect()
+}
+
+/// Every `pub const` of `messages.rs`, by name (a test checks that none is missing), then the
+/// wire codes of the choices in `kinds.rs`.
+fn constants() -> Vec<(String, u64)> {
+    use crate::{ClockMode, EndReason, EstimatorKind};
+    let mut all = constants![
         MAX_OBSTACLES,
         MAX_BEACONS,
         MAX_BEAMS,
@@ -178,14 +192,6 @@ fn constants() -> Vec<(&'static str, u64)> {
         TRUTH_GOAL_REACHED,
         TRUTH_IN_CONTACT,
         END_NONE,
-        END_TICKS,
-        END_GOAL_REACHED,
-        END_STOPPED,
-        END_EXPLORATION_COMPLETE,
-        ESTIMATOR_BAYES,
-        ESTIMATOR_KF,
-        ESTIMATOR_EKF,
-        ESTIMATOR_PF,
         GRID_FRONTIER,
         GRID_CONTACT,
         CELL_UNEXPLORED,
@@ -209,7 +215,17 @@ fn constants() -> Vec<(&'static str, u64)> {
         PROCESS_RESTARTING,
         PROCESS_EXITED,
         PROCESS_FAILED,
-    ]
+    ];
+    all.extend(choice_codes("END", EndReason::NAMES, |i| {
+        EndReason::ALL[i].code()
+    }));
+    all.extend(choice_codes("ESTIMATOR", EstimatorKind::NAMES, |i| {
+        EstimatorKind::ALL[i].code()
+    }));
+    all.extend(choice_codes("CLOCK", ClockMode::NAMES, |i| {
+        ClockMode::ALL[i].code()
+    }));
+    all
 }
 
 /// One topic with what its service must hold, for other languages to open it compatibly.
@@ -583,13 +599,16 @@ mod tests {
 
     #[test]
     fn every_message_constant_is_exported() {
-        let ours: Vec<&str> = constants().iter().map(|(name, _)| *name).collect();
+        let ours: Vec<String> = constants().into_iter().map(|(name, _)| name).collect();
         for line in include_str!("messages.rs").lines() {
             if let Some(rest) = line.strip_prefix("pub const ")
                 && !rest.starts_with("fn ")
                 && let Some((name, _)) = rest.split_once(':')
             {
-                assert!(ours.contains(&name), "layout::constants() misses {name}");
+                assert!(
+                    ours.iter().any(|n| n == name),
+                    "layout::constants() misses {name}"
+                );
             }
         }
     }

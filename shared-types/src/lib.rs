@@ -8,12 +8,14 @@
 
 pub mod control;
 pub mod geometry;
+pub mod kinds;
 pub mod layout;
 pub mod messages;
 pub mod topics;
 
 pub use control::*;
 pub use geometry::*;
+pub use kinds::{ClockMode, EndReason, EstimatorKind, PlannerKind, UnknownChoice};
 pub use messages::*;
 pub use topics::Topic;
 

@@ -221,12 +221,8 @@ pub const TRUTH_GOAL_REACHED: u32 = 2;
 pub const TRUTH_IN_CONTACT: u32 = 4;
 const TRUTH_FLAGS: u32 = TRUTH_END | TRUTH_GOAL_REACHED | TRUTH_IN_CONTACT;
 
-/// `Truth::end_reason` codes (meaningful with `TRUTH_END`).
+/// `Truth::end_reason` while the run goes on; the codes of its end are [`crate::EndReason`]'s.
 pub const END_NONE: u32 = 0;
-pub const END_TICKS: u32 = 1;
-pub const END_GOAL_REACHED: u32 = 2;
-pub const END_STOPPED: u32 = 3;
-pub const END_EXPLORATION_COMPLETE: u32 = 4;
 
 /// `world/truth`: the true state after step `tick`.
 #[repr(C)]
@@ -273,7 +269,7 @@ impl Message for Truth {
         if self.flags & !TRUTH_FLAGS != 0 {
             return Err(Invalid::UnknownCode("flags"));
         }
-        if self.end_reason > END_EXPLORATION_COMPLETE {
+        if self.end_reason != END_NONE && crate::EndReason::from_code(self.end_reason).is_none() {
             return Err(Invalid::UnknownCode("end_reason"));
         }
         all_finite(
@@ -511,12 +507,6 @@ impl Message for Fix {
 // localization/*
 // ---------------------------------------------------------------------------------------------
 
-/// Estimator ids, as in `--estimator`.
-pub const ESTIMATOR_BAYES: u32 = 0;
-pub const ESTIMATOR_KF: u32 = 1;
-pub const ESTIMATOR_EKF: u32 = 2;
-pub const ESTIMATOR_PF: u32 = 3;
-
 /// `localization/pose`: the estimate (μ, Σ) after step `tick`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
@@ -530,6 +520,7 @@ pub struct Pose {
     pub covariance: [f64; 9],
     /// How long predict + correct took for this step (ns).
     pub update_ns: u64,
+    /// Which estimator: an [`crate::EstimatorKind`] code.
     pub estimator: u32,
     pub _pad: u32,
 }
@@ -543,7 +534,7 @@ impl Message for Pose {
         &mut self.header
     }
     fn validate(&self) -> Result<(), Invalid> {
-        if self.estimator > ESTIMATOR_PF {
+        if crate::EstimatorKind::from_code(self.estimator).is_none() {
             return Err(Invalid::UnknownCode("estimator"));
         }
         all_finite("x/y/theta", &[self.x, self.y, self.theta])?;
@@ -785,7 +776,7 @@ pub struct Tick {
     pub header: Header,
     pub dt: f64,
     pub flags: u32,
-    /// 0 realtime, 1 lockstep.
+    /// The clock mode: a [`crate::ClockMode`] code.
     pub mode: u32,
 }
 
@@ -801,7 +792,7 @@ impl Message for Tick {
         if self.flags & !TICK_END != 0 {
             return Err(Invalid::UnknownCode("flags"));
         }
-        if self.mode > 1 {
+        if crate::ClockMode::from_code(self.mode).is_none() {
             return Err(Invalid::UnknownCode("mode"));
         }
         finite("dt", self.dt)

@@ -17,7 +17,7 @@ use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
 use core::f64::consts::{PI, TAU};
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, ESTIMATOR_BAYES, Fix, MAX_BEACONS, Odom, Pose2, WorldMap,
+    BeaconReading, BeaconSite, Beacons, EstimatorKind, Fix, MAX_BEACONS, Odom, Pose2, WorldMap,
     wrap_angle,
 };
 
@@ -612,7 +612,7 @@ impl HistogramFilter {
 
 impl Estimator for HistogramFilter {
     fn id(&self) -> u32 {
-        ESTIMATOR_BAYES
+        EstimatorKind::Bayes.code()
     }
 
     fn predict(&mut self, odom: &Odom) {

@@ -13,7 +13,7 @@ use crate::models::{
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, ESTIMATOR_EKF, Fix, Odom, Pose2, WorldMap, wrap_angle,
+    BeaconReading, BeaconSite, Beacons, EstimatorKind, Fix, Odom, Pose2, WorldMap, wrap_angle,
 };
 use nalgebra::{Cholesky, Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
 
@@ -262,7 +262,7 @@ fn default_initial_sigma() -> Matrix3<f64> {
 
 impl Estimator for Ekf {
     fn id(&self) -> u32 {
-        ESTIMATOR_EKF
+        EstimatorKind::Ekf.code()
     }
 
     fn predict(&mut self, odom: &Odom) {

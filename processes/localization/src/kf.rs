@@ -15,7 +15,7 @@ use crate::kalman::{KalmanError, kalman_correct, symmetrize};
 use crate::models::odometry_is_plausible;
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
-use mole_types::{Beacons, ESTIMATOR_KF, Fix, Odom, Pose2, WorldMap, wrap_angle};
+use mole_types::{Beacons, EstimatorKind, Fix, Odom, Pose2, WorldMap, wrap_angle};
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Matrix4x2, SMatrix, SVector, Vector2, Vector4};
 
 /// Initial position σ (m) of [`Kf::from_map`], as for the EKF.
@@ -236,7 +236,7 @@ impl Kf {
 
 impl Estimator for Kf {
     fn id(&self) -> u32 {
-        ESTIMATOR_KF
+        EstimatorKind::Kf.code()
     }
 
     fn predict(&mut self, odom: &Odom) {

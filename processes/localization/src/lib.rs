@@ -27,10 +27,8 @@ pub use models::BeaconTable;
 pub use noise::NoiseModel;
 pub use pf::{ParticleFilter, PfConfig, low_variance_resample};
 
-use mole_types::{
-    Beacons, ESTIMATOR_BAYES, ESTIMATOR_EKF, ESTIMATOR_KF, ESTIMATOR_PF, Fix, Odom, Particles,
-    Pose, Pose2, WorldMap,
-};
+pub use mole_types::EstimatorKind;
+use mole_types::{Beacons, Fix, Odom, Particles, Pose, Pose2, WorldMap};
 use thiserror::Error;
 
 /// What every estimator does each step; the process main calls predict, then correct, then
@@ -119,73 +117,26 @@ impl From<KalmanError> for ReadingError {
 /// Errors of the localization library.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum LocalizationError {
-    /// `--estimator` named no estimator.
-    #[error("unknown estimator `{0}` (expected bayes, kf, ekf or pf)")]
-    UnknownEstimator(String),
-    /// The estimator exists in the design but not yet in this library (kept for callers that
-    /// match on it; every estimator of algorithms §6 is implemented now).
-    #[error("estimator `{0}` is not implemented yet")]
-    NotImplemented(&'static str),
+    /// The SLAM estimators exist as libraries but do not run in the process yet (issue #12).
+    #[error("estimator `{0}` does not run in the stack yet")]
+    NotInTheStack(EstimatorKind),
 }
 
-/// The four estimators of algorithms §6, as `--estimator` names them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EstimatorKind {
-    /// Histogram Bayes filter (algorithms §6.3).
-    Bayes,
-    /// Linear Kalman filter (algorithms §6.5).
-    Kf,
-    /// Extended Kalman filter (algorithms §6.6).
-    Ekf,
-    /// Particle filter (algorithms §6.7).
-    Pf,
-}
-
-impl EstimatorKind {
-    /// The `localization/pose` estimator id.
-    pub fn id(self) -> u32 {
-        match self {
-            EstimatorKind::Bayes => ESTIMATOR_BAYES,
-            EstimatorKind::Kf => ESTIMATOR_KF,
-            EstimatorKind::Ekf => ESTIMATOR_EKF,
-            EstimatorKind::Pf => ESTIMATOR_PF,
+/// Builds estimator `kind` for the world in `map` (start pose, sensor noise, beacons; the PF
+/// also the seed) with its default configuration. All buffers are allocated here.
+pub fn build_estimator(
+    kind: EstimatorKind,
+    map: &WorldMap,
+) -> Result<Box<dyn Estimator>, LocalizationError> {
+    Ok(match kind {
+        EstimatorKind::Bayes => Box::new(HistogramFilter::from_map(map)),
+        EstimatorKind::Kf => Box::new(Kf::from_map(map)),
+        EstimatorKind::Ekf => Box::new(Ekf::from_map(map)),
+        EstimatorKind::Pf => Box::new(ParticleFilter::from_map(map)),
+        EstimatorKind::EkfSlam | EstimatorKind::FastSlam | EstimatorKind::GraphSlam => {
+            return Err(LocalizationError::NotInTheStack(kind));
         }
-    }
-
-    /// The `--estimator` name.
-    pub fn name(self) -> &'static str {
-        match self {
-            EstimatorKind::Bayes => "bayes",
-            EstimatorKind::Kf => "kf",
-            EstimatorKind::Ekf => "ekf",
-            EstimatorKind::Pf => "pf",
-        }
-    }
-
-    /// Builds this estimator for the world in `map` (start pose, sensor noise, beacons; the PF
-    /// also the seed) with its default configuration. All buffers are allocated here.
-    pub fn from_map(self, map: &WorldMap) -> Result<Box<dyn Estimator>, LocalizationError> {
-        Ok(match self {
-            EstimatorKind::Bayes => Box::new(HistogramFilter::from_map(map)),
-            EstimatorKind::Kf => Box::new(Kf::from_map(map)),
-            EstimatorKind::Ekf => Box::new(Ekf::from_map(map)),
-            EstimatorKind::Pf => Box::new(ParticleFilter::from_map(map)),
-        })
-    }
-}
-
-impl core::str::FromStr for EstimatorKind {
-    type Err = LocalizationError;
-    /// Parses an `--estimator` name, case-insensitively.
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "bayes" | "histogram" => Ok(EstimatorKind::Bayes),
-            "kf" | "kalman" => Ok(EstimatorKind::Kf),
-            "ekf" => Ok(EstimatorKind::Ekf),
-            "pf" | "particle" => Ok(EstimatorKind::Pf),
-            _ => Err(LocalizationError::UnknownEstimator(s.to_owned())),
-        }
-    }
+    })
 }
 
 #[cfg(test)]
@@ -203,26 +154,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn estimator_names_parse_and_map_to_ids() {
-        for kind in [
-            EstimatorKind::Bayes,
-            EstimatorKind::Kf,
-            EstimatorKind::Ekf,
-            EstimatorKind::Pf,
-        ] {
-            assert_eq!(kind.name().parse::<EstimatorKind>(), Ok(kind));
-        }
-        assert_eq!(" EKF ".parse::<EstimatorKind>(), Ok(EstimatorKind::Ekf));
-        assert_eq!(EstimatorKind::Ekf.id(), ESTIMATOR_EKF);
-        assert_eq!(EstimatorKind::Pf.id(), ESTIMATOR_PF);
-        assert!(matches!(
-            "ukf".parse::<EstimatorKind>(),
-            Err(LocalizationError::UnknownEstimator(_))
-        ));
-    }
-
-    #[test]
-    fn from_map_builds_every_estimator() {
+    fn build_estimator_builds_every_filter() {
         let mut map = test_support::zeroed_map();
         map.arena_width = 4.0;
         map.arena_height = 3.0;
@@ -235,8 +167,8 @@ mod tests {
             EstimatorKind::Ekf,
             EstimatorKind::Pf,
         ] {
-            let est = kind.from_map(&map).unwrap();
-            assert_eq!(est.id(), kind.id());
+            let est = build_estimator(kind, &map).unwrap();
+            assert_eq!(est.id(), kind.code());
             let p = est.pose();
             assert!(
                 (p.x - 1.0).abs() < 0.05 && (p.y - 1.0).abs() < 0.05,

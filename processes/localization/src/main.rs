@@ -3,7 +3,7 @@
 //! world/map once, then sensing/{odom, beacons, fix} every step → localization/pose.
 
 use clap::Parser;
-use mole_localization::{Estimator, EstimatorKind};
+use mole_localization::{Estimator, EstimatorKind, build_estimator};
 use mole_runtime::{CommonArgs, Context, StepGate, Wake, now_ns};
 use mole_types::{Pose, WorldMap, topics};
 use std::process::ExitCode;
@@ -93,16 +93,16 @@ fn run(args: &Args, kind: EstimatorKind) -> Result<(), Box<dyn std::error::Error
                         y = pose.y,
                         "took over the running estimate"
                     );
-                    kind.from_map(&starting_at(map, pose))?
+                    build_estimator(kind, &starting_at(map, pose))?
                 }
                 None if args.takeover => {
                     tracing::warn!(
                         "no estimate to take over within {TAKEOVER_GRACE:?}: starting at the \
                          scenario's start pose"
                     );
-                    kind.from_map(map)?
+                    build_estimator(kind, map)?
                 }
-                None => kind.from_map(map)?,
+                None => build_estimator(kind, map)?,
             });
             tracing::info!(estimator = kind.name(), "map received");
         }

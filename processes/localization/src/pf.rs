@@ -12,7 +12,7 @@ use crate::models::{BeaconTable, MIN_RANGE, odometry_is_plausible, sinc, wrap_ne
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError};
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, ESTIMATOR_PF, Fix, MAX_PARTICLES, Odom, Particle,
+    BeaconReading, BeaconSite, Beacons, EstimatorKind, Fix, MAX_PARTICLES, Odom, Particle,
     Particles, Pose2, WorldMap, wrap_angle,
 };
 use rand::{RngExt, SeedableRng};
@@ -428,7 +428,7 @@ impl ParticleFilter {
 
 impl Estimator for ParticleFilter {
     fn id(&self) -> u32 {
-        ESTIMATOR_PF
+        EstimatorKind::Pf.code()
     }
 
     fn predict(&mut self, odom: &Odom) {

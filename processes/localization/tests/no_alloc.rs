@@ -51,7 +51,8 @@ fn steady_state_steps_do_not_allocate() {
         EstimatorKind::Ekf,
         EstimatorKind::Pf,
     ] {
-        let mut est = kind.from_map(&map).expect("every estimator builds");
+        let mut est =
+            mole_localization::build_estimator(kind, &map).expect("every estimator builds");
         let mut step = |est: &mut dyn Estimator, k: usize| {
             let (x, y, th) = (5.0 + 0.005 * k as f64, 5.0, 0.0);
             (odom.v, odom.omega, odom.dt) = (0.5, 0.0, 0.01);

@@ -15,11 +15,10 @@ pub use summary::{LatencyUs, RunMeta, Summary, TopicSummary, UpdateUs, fnv1a64, 
 
 use hdrhistogram::Histogram;
 use mole_types::{
-    CELL_FREE, CELL_OCCUPIED, DIRECTION_SUBSCRIBE, END_EXPLORATION_COMPLETE, END_GOAL_REACHED,
-    END_STOPPED, END_TICKS, GRID_CONTACT, GRID_FRONTIER, Grid, Invalid, MAX_PARTICLES, MAX_PATH,
-    MAX_TOPIC_STATS, MODE_STALLED, Message, NAME_LEN, Particles, PlanStatus, Pose, RunStatus,
-    STATUS_EXPLORATION_COMPLETE, Square, Stats, TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, TopicStats,
-    Truth, WorldMap, read_name, wrap_angle,
+    CELL_FREE, CELL_OCCUPIED, DIRECTION_SUBSCRIBE, EndReason, GRID_CONTACT, GRID_FRONTIER, Grid,
+    Invalid, MAX_PARTICLES, MAX_PATH, MAX_TOPIC_STATS, MODE_STALLED, Message, NAME_LEN, Particles,
+    PlanStatus, Pose, RunStatus, STATUS_EXPLORATION_COMPLETE, Square, Stats, TRUTH_GOAL_REACHED,
+    TRUTH_IN_CONTACT, TopicStats, Truth, WorldMap, read_name, wrap_angle,
 };
 use std::cell::Cell;
 use std::collections::BTreeMap;
@@ -762,13 +761,7 @@ fn nees(e: &[f64; 3], cov: &[f64; 9]) -> Option<f64> {
 
 /// The summary's name of a `Truth::end_reason` code.
 fn end_reason_name(code: u32) -> &'static str {
-    match code {
-        END_TICKS => "ticks",
-        END_GOAL_REACHED => "goal_reached",
-        END_STOPPED => "stopped",
-        END_EXPLORATION_COMPLETE => "exploration_complete",
-        _ => "none",
-    }
+    EndReason::from_code(code).map_or("none", EndReason::name)
 }
 
 impl Monitor {

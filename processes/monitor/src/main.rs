@@ -6,7 +6,7 @@
 use clap::Parser;
 use mole_monitor::{Monitor, RunMeta, write_summary};
 use mole_runtime::{ClockMode, CommonArgs, Context, Wake, now_ns};
-use mole_types::{END_EXPLORATION_COMPLETE, END_GOAL_REACHED, END_STOPPED, END_TICKS, topics};
+use mole_types::{EndReason, topics};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -41,13 +41,7 @@ fn main() -> ExitCode {
 }
 
 fn end_reason(code: u32) -> &'static str {
-    match code {
-        END_TICKS => "ticks",
-        END_GOAL_REACHED => "goal_reached",
-        END_STOPPED => "stopped",
-        END_EXPLORATION_COMPLETE => "exploration_complete",
-        _ => "interrupted",
-    }
+    EndReason::from_code(code).map_or("interrupted", EndReason::name)
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {

@@ -112,7 +112,7 @@ fn pose(tick: u64, x: f64, y: f64, theta: f64, diag: [f64; 3]) -> Pose {
     p.y = y;
     p.theta = theta;
     p.covariance = [diag[0], 0.0, 0.0, 0.0, diag[1], 0.0, 0.0, 0.0, diag[2]];
-    p.estimator = mole_types::ESTIMATOR_EKF;
+    p.estimator = mole_types::EstimatorKind::Ekf.code();
     p
 }
 
@@ -380,7 +380,7 @@ fn goal_contacts_penetration_and_end() {
         }
         if tick == 10 {
             t.flags |= TRUTH_END;
-            t.end_reason = END_GOAL_REACHED;
+            t.end_reason = mole_types::EndReason::GoalReached.code();
         }
         m.on_truth(&t);
     }

@@ -1,46 +1,6 @@
 //! The two clock modes and the rule that decides when a process handles a step.
 
-use core::fmt;
-use core::str::FromStr;
-
-/// How the stack keeps time (docs/architecture.md, "Clock modes").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum ClockMode {
-    /// The world steps at a fixed rate; every process reacts to its newest input.
-    #[default]
-    Realtime,
-    /// The world steps k only after the command for k−1 arrived; every process handles step k
-    /// once all its inputs for k are in. Deterministic, as fast as the machine goes.
-    Lockstep,
-}
-
-impl ClockMode {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            ClockMode::Realtime => "realtime",
-            ClockMode::Lockstep => "lockstep",
-        }
-    }
-}
-
-impl fmt::Display for ClockMode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for ClockMode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "realtime" => Ok(ClockMode::Realtime),
-            "lockstep" => Ok(ClockMode::Lockstep),
-            other => Err(format!(
-                "unknown clock mode `{other}`, expected realtime or lockstep"
-            )),
-        }
-    }
-}
+pub use mole_types::ClockMode;
 
 /// Parses `X,Y` (metres) from a command line or an environment variable, e.g. `--goal 8.5,9`.
 pub fn parse_point(text: &str) -> Result<(f64, f64), String> {
@@ -127,12 +87,5 @@ mod tests {
         assert_eq!(parse_point("8.5, 9"), Ok((8.5, 9.0)));
         assert!(parse_point("8.5").unwrap_err().contains("`8.5`"));
         assert!(parse_point("nan,1").is_err());
-    }
-
-    #[test]
-    fn modes_parse_and_print() {
-        assert_eq!("lockstep".parse::<ClockMode>(), Ok(ClockMode::Lockstep));
-        assert_eq!(ClockMode::Realtime.to_string(), "realtime");
-        assert!("fast".parse::<ClockMode>().is_err());
     }
 }

@@ -6,10 +6,7 @@
 
 use clap::Parser;
 use mole_runtime::{ClockMode, CommonArgs, Context, Wake, now_ns};
-use mole_types::{
-    END_EXPLORATION_COMPLETE, END_GOAL_REACHED, END_STOPPED, END_TICKS, MODE_DONE, TICK_END,
-    TRUTH_END, topics,
-};
+use mole_types::{EndReason, MODE_DONE, TICK_END, TRUTH_END, topics};
 use mole_world::{World, load_scenario};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -100,7 +97,7 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
         let clock = tick_pub.publish(tick, origin, |c| {
             c.dt = dt;
             c.flags = if end != 0 { TICK_END } else { 0 };
-            c.mode = u32::from(mode == ClockMode::Lockstep);
+            c.mode = mode.code();
         });
         truth.and(clock)
     };
@@ -115,7 +112,7 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
         };
         let wake = waitset.wait(&mut ctx, Some(deadline))?;
         if wake == Wake::Shutdown {
-            publish_step(tick, &world, 0, END_STOPPED)?;
+            publish_step(tick, &world, 0, EndReason::Stopped.code())?;
             tracing::info!(tick, "stopped");
             return Ok(());
         }
@@ -163,12 +160,12 @@ fn run(args: &Args, scenario: &mole_world::Scenario) -> Result<(), Box<dyn std::
         tick += 1;
         let latency = std::mem::take(&mut command_latency_ns);
         let end = if tick >= args.ticks {
-            END_TICKS
+            EndReason::Ticks.code()
         } else if stop_at_goal && world.goal_reached() {
-            END_GOAL_REACHED
+            EndReason::GoalReached.code()
         } else if exploration_complete {
             // The planner found no reachable frontier left (algorithms §5): the run is done.
-            END_EXPLORATION_COMPLETE
+            EndReason::ExplorationComplete.code()
         } else {
             0
         };

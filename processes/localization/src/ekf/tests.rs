@@ -2,7 +2,7 @@ use super::*;
 use crate::test_support::zeroed_map;
 use approx::assert_relative_eq;
 use core::f64::consts::{FRAC_PI_4, PI};
-use mole_types::{Header, MAX_BEACONS, Pose};
+use mole_types::{EstimatorKind, Header, MAX_BEACONS, Pose};
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -92,7 +92,7 @@ fn from_map_takes_start_pose_noise_and_beacons() {
     assert_eq!(ekf.sigma[(2, 2)], INITIAL_STD_THETA * INITIAL_STD_THETA);
     assert_eq!(ekf.beacons.get(12), Some((9.0, 9.0)));
     assert_eq!(ekf.beacons.get(0), None);
-    assert_eq!(ekf.id(), ESTIMATOR_EKF);
+    assert_eq!(ekf.id(), EstimatorKind::Ekf.code());
 }
 
 #[test]
@@ -301,7 +301,7 @@ fn write_pose_fills_the_estimate_but_not_the_header() {
         out.covariance,
         [0.04, 0.01, 0.0, 0.01, 0.04, -0.002, 0.0, -0.002, 0.01]
     );
-    assert_eq!(out.estimator, ESTIMATOR_EKF);
+    assert_eq!(out.estimator, EstimatorKind::Ekf.code());
     assert_eq!((out.header.seq, out.update_ns), (42, 7));
     assert_eq!(mole_types::Message::validate(&out), Ok(()));
 }
