@@ -135,7 +135,7 @@ fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
     // Every topic of the stack is an iceoryx2 service listed with its documented type name
     // (what `iox2 service list` shows).
     let listed = mole_runtime::list_topics(&stack.namespace);
-    for (topic, type_name) in mole_types::topics::ALL {
+    for (topic, type_name) in mole_types::topics::all() {
         assert!(
             listed.contains(&(topic.to_string(), type_name.to_string())),
             "{topic} ({type_name}) is not listed: {listed:?}"

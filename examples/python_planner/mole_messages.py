@@ -392,6 +392,43 @@ class Particles(ctypes.Structure):
 _check(Particles, 262184, 8, [0, 32, 36, 40])
 
 
+class Landmark(ctypes.Structure):
+    """`mole.Landmark.v1`: 56 bytes, alignment 8."""
+
+    _fields_ = [
+        ("id", ctypes.c_uint32),
+        ("_pad", ctypes.c_uint32),
+        ("x", ctypes.c_double),
+        ("y", ctypes.c_double),
+        ("covariance", ctypes.c_double * 4),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.Landmark.v1"
+
+
+_check(Landmark, 56, 8, [0, 4, 8, 16, 24])
+
+
+class Landmarks(ctypes.Structure):
+    """`mole.Landmarks.v1`: 3624 bytes, alignment 8."""
+
+    _fields_ = [
+        ("header", Header),
+        ("n_landmarks", ctypes.c_uint32),
+        ("estimator", ctypes.c_uint32),
+        ("landmarks", Landmark * 64),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.Landmarks.v1"
+
+
+_check(Landmarks, 3624, 8, [0, 32, 36, 40])
+
+
 class Grid(ctypes.Structure):
     """`mole.Grid.v1`: 262216 bytes, alignment 8."""
 
@@ -631,6 +668,7 @@ MAX_TACTILE = 32
 MAX_CONTACTS = 8
 MAX_GRID_CELLS = 262144
 MAX_PARTICLES = 16384
+MAX_LANDMARKS = 64
 MAX_PATH = 512
 MAX_TOPIC_STATS = 16
 NAME_LEN = 32
@@ -639,6 +677,7 @@ TRUTH_END = 1
 TRUTH_GOAL_REACHED = 2
 TRUTH_IN_CONTACT = 4
 END_NONE = 0
+LANDMARK_ANONYMOUS = 4294967295
 GRID_FRONTIER = 0
 GRID_CONTACT = 1
 CELL_UNEXPLORED = 0
@@ -724,6 +763,10 @@ LOCALIZATION_PARTICLES = Topic(
     "localization/particles", Particles, history=0, buffer=2, max_publishers=2, max_subscribers=8
 )
 
+LOCALIZATION_LANDMARKS = Topic(
+    "localization/landmarks", Landmarks, history=0, buffer=4, max_publishers=2, max_subscribers=8
+)
+
 MAPPING_GRID = Topic(
     "mapping/grid", Grid, history=0, buffer=4, max_publishers=2, max_subscribers=8
 )
@@ -758,8 +801,9 @@ STACK_PROCESSES = Topic(
 
 TOPICS = (
     WORLD_MAP, WORLD_TRUTH, SENSING_SCAN, SENSING_TACTILE, SENSING_ODOM, SENSING_BEACONS,
-    SENSING_FIX, LOCALIZATION_POSE, LOCALIZATION_PARTICLES, MAPPING_GRID, MAPPING_CONTACT,
-    PLANNING_CMD, PLANNING_STATUS, STACK_TICK, STACK_STATS, MONITOR_STATUS, STACK_PROCESSES,
+    SENSING_FIX, LOCALIZATION_POSE, LOCALIZATION_PARTICLES, LOCALIZATION_LANDMARKS, MAPPING_GRID,
+    MAPPING_CONTACT, PLANNING_CMD, PLANNING_STATUS, STACK_TICK, STACK_STATS, MONITOR_STATUS,
+    STACK_PROCESSES,
 )
 
 

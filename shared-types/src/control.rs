@@ -78,7 +78,6 @@ impl ControlRequest {
 }
 
 impl Message for ControlRequest {
-    const TYPE_NAME: &'static str = "mole.ControlRequest.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -131,7 +130,6 @@ pub struct ControlResponse {
 }
 
 impl Message for ControlResponse {
-    const TYPE_NAME: &'static str = "mole.ControlResponse.v1";
     fn header(&self) -> &Header {
         &self.header
     }

@@ -53,8 +53,15 @@ impl std::error::Error for Invalid {}
 pub trait Message:
     bytemuck::Pod + iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend + core::fmt::Debug
 {
-    /// The versioned name every language must agree on, e.g. `mole.Scan.v1`.
-    const TYPE_NAME: &'static str;
+    /// The versioned name every language must agree on, e.g. `mole.Scan.v1`: the one written
+    /// in the type's `#[type_name("...")]` attribute.
+    fn wire_type_name() -> &'static str {
+        // SAFETY: reading the name has no precondition; the trait's safety contract (the same
+        // layout in every language) is the message rules', checked by `layout`.
+        unsafe {
+            <Self as iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend>::type_name()
+        }
+    }
     /// The common header.
     fn header(&self) -> &Header;
     /// The common header, to stamp before publishing.

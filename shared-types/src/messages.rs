@@ -21,6 +21,9 @@ pub const MAX_CONTACTS: usize = 8;
 pub const MAX_GRID_CELLS: usize = 512 * 512;
 /// Most particles in a particle set.
 pub const MAX_PARTICLES: usize = 16_384;
+/// Landmarks a SLAM estimator can hold (`localization/landmarks`): room for every beacon and
+/// for the spurious ones an estimator without beacon ids may create.
+pub const MAX_LANDMARKS: usize = 64;
 /// Most waypoints in a planned path.
 pub const MAX_PATH: usize = 512;
 /// Most topics one process reports statistics for.
@@ -138,7 +141,6 @@ impl WorldMap {
 }
 
 impl Message for WorldMap {
-    const TYPE_NAME: &'static str = "mole.WorldMap.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -257,7 +259,6 @@ impl Truth {
 }
 
 impl Message for Truth {
-    const TYPE_NAME: &'static str = "mole.Truth.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -316,7 +317,6 @@ impl Scan {
 }
 
 impl Message for Scan {
-    const TYPE_NAME: &'static str = "mole.Scan.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -371,7 +371,6 @@ impl Tactile {
 }
 
 impl Message for Tactile {
-    const TYPE_NAME: &'static str = "mole.Tactile.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -400,7 +399,6 @@ pub struct Odom {
 }
 
 impl Message for Odom {
-    const TYPE_NAME: &'static str = "mole.Odom.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -447,7 +445,6 @@ impl Beacons {
 }
 
 impl Message for Beacons {
-    const TYPE_NAME: &'static str = "mole.Beacons.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -484,7 +481,6 @@ pub struct Fix {
 }
 
 impl Message for Fix {
-    const TYPE_NAME: &'static str = "mole.Fix.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -526,7 +522,6 @@ pub struct Pose {
 }
 
 impl Message for Pose {
-    const TYPE_NAME: &'static str = "mole.Pose.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -573,7 +568,6 @@ impl Particles {
 }
 
 impl Message for Particles {
-    const TYPE_NAME: &'static str = "mole.Particles.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -584,6 +578,65 @@ impl Message for Particles {
         within("n_particles", self.n_particles, MAX_PARTICLES)?;
         for p in self.particles() {
             all_finite("particles", &[p.x, p.y, p.theta, p.w])?;
+        }
+        Ok(())
+    }
+}
+
+/// `Landmark::id` of a landmark created from readings without beacon ids.
+pub const LANDMARK_ANONYMOUS: u32 = u32::MAX;
+
+/// One estimated landmark: its mean and 2×2 covariance in the world frame.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Landmark.v1")]
+pub struct Landmark {
+    /// The beacon id it was created from, or `LANDMARK_ANONYMOUS`.
+    pub id: u32,
+    pub _pad: u32,
+    pub x: f64,
+    pub y: f64,
+    /// Σ over (x, y), row-major.
+    pub covariance: [f64; 4],
+}
+
+/// `localization/landmarks`: a SLAM estimator's map of the beacons (algorithms §6.9) after step
+/// `tick`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Landmarks.v1")]
+pub struct Landmarks {
+    pub header: Header,
+    pub n_landmarks: u32,
+    /// Which estimator: an [`crate::EstimatorKind`] code.
+    pub estimator: u32,
+    pub landmarks: [Landmark; MAX_LANDMARKS],
+}
+
+impl Landmarks {
+    pub fn landmarks(&self) -> &[Landmark] {
+        &self.landmarks[..(self.n_landmarks as usize).min(MAX_LANDMARKS)]
+    }
+}
+
+impl Message for Landmarks {
+    fn header(&self) -> &Header {
+        &self.header
+    }
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+    fn validate(&self) -> Result<(), Invalid> {
+        within("n_landmarks", self.n_landmarks, MAX_LANDMARKS)?;
+        if crate::EstimatorKind::from_code(self.estimator).is_none() {
+            return Err(Invalid::UnknownCode("estimator"));
+        }
+        for l in self.landmarks() {
+            all_finite("landmarks", &[l.x, l.y])?;
+            all_finite("landmarks.covariance", &l.covariance)?;
+            if l.covariance[0] < 0.0 || l.covariance[3] < 0.0 {
+                return Err(Invalid::OutOfRange("landmarks.covariance"));
+            }
         }
         Ok(())
     }
@@ -628,7 +681,6 @@ impl Grid {
 }
 
 impl Message for Grid {
-    const TYPE_NAME: &'static str = "mole.Grid.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -686,7 +738,6 @@ pub struct Cmd {
 }
 
 impl Message for Cmd {
-    const TYPE_NAME: &'static str = "mole.Cmd.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -735,7 +786,6 @@ impl PlanStatus {
 }
 
 impl Message for PlanStatus {
-    const TYPE_NAME: &'static str = "mole.PlanStatus.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -781,7 +831,6 @@ pub struct Tick {
 }
 
 impl Message for Tick {
-    const TYPE_NAME: &'static str = "mole.Tick.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -852,7 +901,6 @@ impl Stats {
 }
 
 impl Message for Stats {
-    const TYPE_NAME: &'static str = "mole.Stats.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -920,7 +968,6 @@ impl Processes {
 }
 
 impl Message for Processes {
-    const TYPE_NAME: &'static str = "mole.Processes.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -954,7 +1001,6 @@ pub struct RunStatus {
 }
 
 impl Message for RunStatus {
-    const TYPE_NAME: &'static str = "mole.RunStatus.v1";
     fn header(&self) -> &Header {
         &self.header
     }

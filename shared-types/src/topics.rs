@@ -65,23 +65,55 @@ impl<M> Topic<M> {
     }
 }
 
-pub const WORLD_MAP: Topic<WorldMap> = Topic::new("world/map").history(1).buffer(2);
-pub const WORLD_TRUTH: Topic<Truth> = Topic::new("world/truth").buffer(64);
-pub const SENSING_SCAN: Topic<Scan> = Topic::new("sensing/scan");
-pub const SENSING_TACTILE: Topic<Tactile> = Topic::new("sensing/tactile");
-pub const SENSING_ODOM: Topic<Odom> = Topic::new("sensing/odom");
-pub const SENSING_BEACONS: Topic<Beacons> = Topic::new("sensing/beacons");
-pub const SENSING_FIX: Topic<Fix> = Topic::new("sensing/fix");
-pub const LOCALIZATION_POSE: Topic<Pose> = Topic::new("localization/pose").buffer(64);
-pub const LOCALIZATION_PARTICLES: Topic<Particles> = Topic::new("localization/particles").buffer(2);
-pub const MAPPING_GRID: Topic<Grid> = Topic::new("mapping/grid").buffer(4);
-pub const MAPPING_CONTACT: Topic<Grid> = Topic::new("mapping/contact").buffer(4);
-pub const PLANNING_CMD: Topic<Cmd> = Topic::new("planning/cmd");
-pub const PLANNING_STATUS: Topic<PlanStatus> = Topic::new("planning/status").buffer(4);
-pub const STACK_TICK: Topic<Tick> = Topic::new("stack/tick");
-pub const STACK_STATS: Topic<Stats> = Topic::new("stack/stats").buffer(64).max_publishers(32);
-pub const MONITOR_STATUS: Topic<RunStatus> = Topic::new("monitor/status").history(1).buffer(4);
-pub const STACK_PROCESSES: Topic<Processes> = Topic::new("stack/processes").history(1).buffer(4);
+/// Declares every topic once: its constant, its message type and its service settings. From
+/// this one table come the constants, [`all`] (name and type name, in table order) and
+/// [`for_each`], which hands every topic, typed, to a [`TopicVisitor`] (the layout table, the
+/// Python classes, tools that treat topics generically).
+macro_rules! topics {
+    ($( $(#[$meta:meta])* $constant:ident: $message:ty = $topic:expr; )+) => {
+        $( $(#[$meta])* pub const $constant: Topic<$message> = $topic; )+
+
+        /// Every publish-subscribe topic with its message's type name, in table order.
+        pub fn all() -> Vec<(&'static str, &'static str)> {
+            vec![$(($constant.name, <$message as crate::Message>::wire_type_name())),+]
+        }
+
+        /// Hands every topic of the table, in order, to `visitor`.
+        pub fn for_each(visitor: &mut impl TopicVisitor) {
+            $( visitor.visit(stringify!($constant), $constant); )+
+        }
+    };
+}
+
+/// Something that handles every topic, whatever its message type (see [`for_each`]).
+pub trait TopicVisitor {
+    /// Called once per topic with its constant's name (`SENSING_SCAN`) and the topic.
+    fn visit<M: crate::Message>(&mut self, constant: &'static str, topic: Topic<M>);
+}
+
+topics! {
+    /// The arena, robot and sensor settings, once (history 1 for processes that join late).
+    WORLD_MAP: WorldMap = Topic::new("world/map").history(1).buffer(2);
+    /// The true state after each step.
+    WORLD_TRUTH: Truth = Topic::new("world/truth").buffer(64);
+    SENSING_SCAN: Scan = Topic::new("sensing/scan");
+    SENSING_TACTILE: Tactile = Topic::new("sensing/tactile");
+    SENSING_ODOM: Odom = Topic::new("sensing/odom");
+    SENSING_BEACONS: Beacons = Topic::new("sensing/beacons");
+    SENSING_FIX: Fix = Topic::new("sensing/fix");
+    LOCALIZATION_POSE: Pose = Topic::new("localization/pose").buffer(64);
+    LOCALIZATION_PARTICLES: Particles = Topic::new("localization/particles").buffer(2);
+    /// The SLAM estimators' beacon map.
+    LOCALIZATION_LANDMARKS: Landmarks = Topic::new("localization/landmarks").buffer(4);
+    MAPPING_GRID: Grid = Topic::new("mapping/grid").buffer(4);
+    MAPPING_CONTACT: Grid = Topic::new("mapping/contact").buffer(4);
+    PLANNING_CMD: Cmd = Topic::new("planning/cmd");
+    PLANNING_STATUS: PlanStatus = Topic::new("planning/status").buffer(4);
+    STACK_TICK: Tick = Topic::new("stack/tick");
+    STACK_STATS: Stats = Topic::new("stack/stats").buffer(64).max_publishers(32);
+    MONITOR_STATUS: RunStatus = Topic::new("monitor/status").history(1).buffer(4);
+    STACK_PROCESSES: Processes = Topic::new("stack/processes").history(1).buffer(4);
+}
 
 /// A request-response service: its name and the types of its requests and responses.
 pub struct RequestResponse<Req, Resp> {
@@ -110,27 +142,6 @@ impl<Req, Resp> RequestResponse<Req, Resp> {
 pub const STACK_CONTROL: RequestResponse<crate::ControlRequest, crate::ControlResponse> =
     RequestResponse::new("stack/control");
 
-/// Every publish-subscribe topic with its message's type name, in table order.
-pub const ALL: &[(&str, &str)] = &[
-    (WORLD_MAP.name, "mole.WorldMap.v1"),
-    (WORLD_TRUTH.name, "mole.Truth.v1"),
-    (SENSING_SCAN.name, "mole.Scan.v1"),
-    (SENSING_TACTILE.name, "mole.Tactile.v1"),
-    (SENSING_ODOM.name, "mole.Odom.v1"),
-    (SENSING_BEACONS.name, "mole.Beacons.v1"),
-    (SENSING_FIX.name, "mole.Fix.v1"),
-    (LOCALIZATION_POSE.name, "mole.Pose.v1"),
-    (LOCALIZATION_PARTICLES.name, "mole.Particles.v1"),
-    (MAPPING_GRID.name, "mole.Grid.v1"),
-    (MAPPING_CONTACT.name, "mole.Grid.v1"),
-    (PLANNING_CMD.name, "mole.Cmd.v1"),
-    (PLANNING_STATUS.name, "mole.PlanStatus.v1"),
-    (STACK_TICK.name, "mole.Tick.v1"),
-    (STACK_STATS.name, "mole.Stats.v1"),
-    (MONITOR_STATUS.name, "mole.RunStatus.v1"),
-    (STACK_PROCESSES.name, "mole.Processes.v1"),
-];
-
 /// The full service name of a topic in a namespace.
 pub fn service_name(namespace: &str, topic: &str) -> String {
     format!("mole/{namespace}/{topic}")
@@ -139,39 +150,12 @@ pub fn service_name(namespace: &str, topic: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Message;
-
-    fn type_name_of<M: Message>(_: Topic<M>) -> &'static str {
-        M::TYPE_NAME
-    }
-
     #[test]
-    fn table_matches_the_topic_constants() {
-        let from_types = [
-            type_name_of(WORLD_MAP),
-            type_name_of(WORLD_TRUTH),
-            type_name_of(SENSING_SCAN),
-            type_name_of(SENSING_TACTILE),
-            type_name_of(SENSING_ODOM),
-            type_name_of(SENSING_BEACONS),
-            type_name_of(SENSING_FIX),
-            type_name_of(LOCALIZATION_POSE),
-            type_name_of(LOCALIZATION_PARTICLES),
-            type_name_of(MAPPING_GRID),
-            type_name_of(MAPPING_CONTACT),
-            type_name_of(PLANNING_CMD),
-            type_name_of(PLANNING_STATUS),
-            type_name_of(STACK_TICK),
-            type_name_of(STACK_STATS),
-            type_name_of(MONITOR_STATUS),
-            type_name_of(STACK_PROCESSES),
-        ];
-        let table: Vec<&str> = ALL.iter().map(|(_, t)| *t).collect();
-        assert_eq!(table, from_types);
-        let mut names: Vec<&str> = ALL.iter().map(|(n, _)| *n).collect();
+    fn topic_names_are_unique() {
+        let mut names: Vec<&str> = all().iter().map(|(n, _)| *n).collect();
         names.sort_unstable();
         names.dedup();
-        assert_eq!(names.len(), ALL.len(), "topic names are unique");
+        assert_eq!(names.len(), all().len());
     }
 
     #[test]

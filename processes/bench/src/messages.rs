@@ -45,7 +45,6 @@ macro_rules! bench_message {
         }
 
         impl Message for $name {
-            const TYPE_NAME: &'static str = $type_name;
             fn header(&self) -> &Header {
                 &self.header
             }
@@ -147,7 +146,6 @@ impl BenchAck {
 }
 
 impl Message for BenchAck {
-    const TYPE_NAME: &'static str = "mole.BenchAck.v1";
     fn header(&self) -> &Header {
         &self.header
     }
@@ -172,7 +170,7 @@ mod tests {
     use super::*;
 
     fn size_of_type(size: usize) -> Result<(usize, &'static str), crate::BenchError> {
-        with_message_type!(size, M => Ok((core::mem::size_of::<M>(), M::TYPE_NAME)))
+        with_message_type!(size, M => Ok((core::mem::size_of::<M>(), M::wire_type_name())))
     }
 
     #[test]

@@ -5,12 +5,14 @@
 //! v ← −α·v (at least a minimum speed) for a fixed time, turn toward the freest direction (away
 //! from the obstacle), and hand control back to the wrapped planner with [`Planner::replan`].
 //! Hysteresis: the range trigger re-arms only once d_obs rises above d_release > d_th, or after
-//! a cooldown, so the robot does not chatter at the threshold.
+//! a cooldown, so the robot does not chatter at the threshold. The robot's velocity is the
+//! command sent last ([`PlannerInput::last_command`]); like the planners, this layer returns a
+//! wish, limited once by [`crate::Limited`] around it.
 
 use crate::obstacles::{contact_force, free_travel, freest_direction, nearest_obstacle};
-use crate::{Command, Planner, PlannerInput, RobotLimits, stop_command, usable};
+use crate::{Command, Planner, PlannerInput, RobotLimits, usable};
 use core::f64::consts::{FRAC_PI_2, FRAC_PI_3, PI};
-use mole_types::{MODE_BOUNCE_BACK, wrap_angle};
+use mole_types::{MODE_BOUNCE_BACK, PlannerKind, wrap_angle};
 
 /// Algorithms §4.1: the bounced velocity (v_x, v_y)(t+1) = −α·(v_x, v_y)(t), α ∈ (0, 1].
 pub fn bounce_back_velocity(v: [f64; 2], alpha: f64) -> [f64; 2] {
@@ -161,7 +163,6 @@ pub struct BounceBack<P: Planner> {
     limits: RobotLimits,
     config: BounceBackConfig,
     phase: Phase,
-    prev: Command,
     bounces: u32,
     /// The direction (robot frame) the wrapped planner wanted to drive in on the last step but
     /// could not: the speed cap held it d_stop short of an obstacle.
@@ -180,7 +181,6 @@ impl<P: Planner> BounceBack<P> {
             limits: limits.sanitized(),
             config: config.sanitized(),
             phase: Phase::Armed,
-            prev: Command::STOP,
             bounces: 0,
             blocked: None,
         }
@@ -226,16 +226,17 @@ impl<P: Planner> BounceBack<P> {
     fn trigger(&mut self, input: &PlannerInput, obstacle: f64, touch: Option<[f64; 2]>) {
         self.bounces = self.bounces.saturating_add(1);
         let c = obstacle.cos();
+        let sent = input.last_command.v;
         let sign = if c > 0.2 {
             -1.0
         } else if c < -0.2 {
             1.0
-        } else if self.prev.v > 0.0 {
+        } else if sent > 0.0 {
             -1.0
         } else {
             1.0
         };
-        let speed = (self.config.alpha * self.prev.v.abs())
+        let speed = (self.config.alpha * sent.abs())
             .max(self.config.min_reverse_speed)
             .min(self.limits.max_speed);
         let free = input
@@ -276,19 +277,19 @@ impl<P: Planner> BounceBack<P> {
 }
 
 impl<P: Planner> Planner for BounceBack<P> {
-    fn name(&self) -> &'static str {
-        self.inner.name()
+    fn kind(&self) -> PlannerKind {
+        self.inner.kind()
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {
         if !usable(input) {
-            self.prev = stop_command(&self.limits, &self.prev, input.dt);
-            return self.prev;
+            return Command::STOP;
         }
         let (tick, dt) = (input.tick, input.dt);
+        let sent = input.last_command.v;
         let blocked = self.blocked.take();
-        let moving = self.prev.v.abs() > MOVING || blocked.is_some();
-        let travel = blocked.unwrap_or(if self.prev.v < 0.0 { PI } else { 0.0 });
+        let moving = sent.abs() > MOVING || blocked.is_some();
+        let travel = blocked.unwrap_or(if sent < 0.0 { PI } else { 0.0 });
         let (d_ahead, obstacle_angle) = self.d_obs(input, travel);
         let touch = input
             .tactile
@@ -359,7 +360,7 @@ impl<P: Planner> Planner for BounceBack<P> {
             self.phase = Phase::Disarmed { since: tick };
         }
 
-        let wish = match self.phase {
+        match self.phase {
             Phase::Reversing { v_rev, .. } => Command {
                 v: v_rev,
                 omega: 0.0,
@@ -374,14 +375,7 @@ impl<P: Planner> Planner for BounceBack<P> {
                 }
             }
             Phase::Armed | Phase::Disarmed { .. } => self.pass_through(input),
-        };
-        let (v, omega) = self.limits.limit(&self.prev, wish.v, wish.omega, dt);
-        self.prev = Command {
-            v,
-            omega,
-            mode: wish.mode,
-        };
-        self.prev
+        }
     }
 
     fn replan(&mut self) {
@@ -400,11 +394,9 @@ impl<P: Planner> Planner for BounceBack<P> {
         self.inner.target()
     }
 
-    /// The wrapped planner's status, with this layer's mode while it bounces and its count.
+    /// The wrapped planner's status with this layer's bounce count.
     fn write_status(&self, status: &mut mole_types::PlanStatus) {
         self.inner.write_status(status);
-        // The command last sent carries the mode: the layer's own while it bounces.
-        status.mode = self.prev.mode;
         status.bounces = self.bounces;
     }
 }

@@ -4,10 +4,12 @@
 //! newest pose, scan, tactile forces and frontier grid, calls [`Planner::step`] once per
 //! simulation step and writes the returned [`Command`] into the loaned `planning/cmd` sample.
 //! The reactive layer [`bounce_back::BounceBack`] wraps any planner (algorithms §4: react at once, then
-//! hand back and re-plan). [`planner_by_name`] builds the configured stack.
+//! hand back and re-plan). [`build_planner`] builds the configured stack.
 //!
-//! Every command a planner returns is finite, within the speed limits and within the
-//! acceleration limits relative to the previous command ([`RobotLimits::limit`]).
+//! The planners and the reactive layer say what they wish to drive; the outermost layer,
+//! [`Limited`], makes the one command that is sent: finite, within the speed limits and within
+//! the acceleration limits relative to the command sent last ([`PlannerInput::last_command`],
+//! [`RobotLimits::limit`]). It is the only place the limits are applied.
 
 pub mod apf;
 pub mod bounce_back;
@@ -31,21 +33,14 @@ pub use grid_search::GridSearch;
 pub use bounce_back::{BounceBack, BounceBackConfig, PositionUpdate, bounce_back_position};
 pub use random_walk::{DiagonalStride, RandomWalk, RandomWalkConfig, WalkReport};
 
-use mole_types::{Grid, MODE_IDLE, PlanStatus, Pose2, RobotSpec, STATUS_HAS_GOAL, Scan, Tactile};
+use mole_types::{
+    Grid, MODE_IDLE, PlanStatus, PlannerKind, Pose2, RobotSpec, STATUS_HAS_GOAL, Scan, Tactile,
+};
 use thiserror::Error;
-
-/// The planners [`planner_by_name`] knows.
-pub const KNOWN_PLANNERS: &[&str] = &["random-walk", "apf", "dwa", "frontier"];
 
 /// Why a planner could not be built or a pure function could not run.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum PlanningError {
-    /// `--planner NAME` names no planner this crate has.
-    #[error("unknown planner `{name}`; known planners: {}", KNOWN_PLANNERS.join(", "))]
-    UnknownPlanner {
-        /// The name asked for.
-        name: String,
-    },
     /// A parameter is NaN, infinite or outside its range.
     #[error("parameter `{name}` = {value} is out of range: {expected}")]
     InvalidParameter {
@@ -57,10 +52,10 @@ pub enum PlanningError {
         expected: &'static str,
     },
     /// A goal-seeking planner was asked for without a goal.
-    #[error("planner `{name}` needs a goal: pass `--goal X,Y` (or give the scenario a [goal])")]
+    #[error("planner `{kind}` needs a goal: pass `--goal X,Y` (or give the scenario a [goal])")]
     MissingGoal {
         /// The planner asked for.
-        name: String,
+        kind: PlannerKind,
     },
 }
 
@@ -153,6 +148,9 @@ pub struct PlannerInput<'a> {
     pub tactile: Option<&'a Tactile>,
     /// Newest frontier grid (0 unexplored, 1 free, 2 occupied).
     pub grid: Option<&'a Grid>,
+    /// The command the process sent last step ([`Command::STOP`] before the first): the
+    /// robot's current velocity as far as planning knows, and what [`Limited`] limits against.
+    pub last_command: Command,
 }
 
 /// A velocity command and the mode that produced it.
@@ -177,10 +175,11 @@ impl Command {
 
 /// A motion planner: one command per step.
 pub trait Planner {
-    /// The name `--planner` selects it by.
-    fn name(&self) -> &'static str;
-    /// The command for this step; finite, within the speed limits, and within the acceleration
-    /// limits relative to the previous command.
+    /// The kind `--planner` selects it by.
+    fn kind(&self) -> PlannerKind;
+    /// The (v, ω) this planner wishes to drive this step and its mode. Only the outermost layer,
+    /// [`Limited`], limits it; a planner reads the robot's current velocity from
+    /// [`PlannerInput::last_command`], never from its own previous wish.
     fn step(&mut self, input: &PlannerInput) -> Command;
     /// Drop the current plan and choose a new one at the next step (algorithms §4 "path re-planning",
     /// asked for by the reactive layer after a bounce-back).
@@ -196,8 +195,8 @@ pub trait Planner {
     fn target(&self) -> Option<[f64; 2]> {
         None
     }
-    /// Fills `planning/status` (everything but the header) after a step: by default the last
-    /// mode is unknown here, so `mode` is left as the caller set it (the step's command mode);
+    /// Fills `planning/status` (everything but the header) after a step: `mode` is left as the
+    /// caller set it ([`Limited`] writes the mode of the command it sent); by default
     /// goal = [`Planner::target`] with `STATUS_HAS_GOAL`, bounces, no frontier, no path.
     fn write_status(&self, status: &mut PlanStatus) {
         status.flags = 0;
@@ -214,8 +213,8 @@ pub trait Planner {
 }
 
 impl<P: Planner + ?Sized> Planner for Box<P> {
-    fn name(&self) -> &'static str {
-        (**self).name()
+    fn kind(&self) -> PlannerKind {
+        (**self).kind()
     }
     fn step(&mut self, input: &PlannerInput) -> Command {
         (**self).step(input)
@@ -246,17 +245,76 @@ pub(crate) fn usable(input: &PlannerInput) -> bool {
         && input.dt > 0.0
 }
 
-/// The stop command for an unusable input: brake toward (0, 0) as fast as the limits allow
-/// (at once without a valid Δt, which gives no time base to ramp on).
-pub(crate) fn stop_command(limits: &RobotLimits, prev: &Command, dt: f64) -> Command {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Command::STOP;
+/// The outermost layer of every planner stack: the one place where a wish becomes the command
+/// that is sent, limited ([`RobotLimits::limit`]) relative to [`PlannerInput::last_command`].
+/// Without a valid Δt there is no time base to ramp on, so it stops at once.
+#[derive(Debug, Clone)]
+pub struct Limited<P: Planner> {
+    inner: P,
+    limits: RobotLimits,
+    /// The mode of the command returned last, for `planning/status`.
+    mode: u32,
+}
+
+impl<P: Planner> Limited<P> {
+    /// Limits `inner`'s wishes to a robot with `limits`.
+    pub fn new(inner: P, limits: RobotLimits) -> Self {
+        Self {
+            inner,
+            limits: limits.sanitized(),
+            mode: MODE_IDLE,
+        }
     }
-    let (v, omega) = limits.limit(prev, 0.0, 0.0, dt);
-    Command {
-        v,
-        omega,
-        mode: MODE_IDLE,
+
+    /// The wrapped planner.
+    pub fn inner(&self) -> &P {
+        &self.inner
+    }
+}
+
+impl<P: Planner> Planner for Limited<P> {
+    fn kind(&self) -> PlannerKind {
+        self.inner.kind()
+    }
+
+    fn step(&mut self, input: &PlannerInput) -> Command {
+        let wish = self.inner.step(input);
+        let command = if input.dt.is_finite() && input.dt > 0.0 {
+            let (v, omega) = self
+                .limits
+                .limit(&input.last_command, wish.v, wish.omega, input.dt);
+            Command {
+                v,
+                omega,
+                mode: wish.mode,
+            }
+        } else {
+            Command::STOP
+        };
+        self.mode = command.mode;
+        command
+    }
+
+    fn replan(&mut self) {
+        self.inner.replan();
+    }
+
+    fn obstacle_hint(&mut self, at: [f64; 2], heading: f64) {
+        self.inner.obstacle_hint(at, heading);
+    }
+
+    fn bounces(&self) -> u32 {
+        self.inner.bounces()
+    }
+
+    fn target(&self) -> Option<[f64; 2]> {
+        self.inner.target()
+    }
+
+    /// The wrapped planner's status with the mode of the command sent.
+    fn write_status(&self, status: &mut PlanStatus) {
+        self.inner.write_status(status);
+        status.mode = self.mode;
     }
 }
 
@@ -274,10 +332,14 @@ pub enum LocalPlanner {
 /// What `--planner`, `--goal` and friends ask for; see [`build_planner`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannerConfig {
-    /// `random-walk` | `apf` | `dwa` | `frontier`.
-    pub name: String,
+    /// Which planner.
+    pub kind: PlannerKind,
     /// Goal (world, m): required by `apf` and `dwa`.
     pub goal: Option<(f64, f64)>,
+    /// The goal counts as reached (`MODE_ARRIVED`) within this distance (m): the world's own
+    /// tolerance (`WorldMap::goal_tolerance`), so that planner and world agree. `None` keeps
+    /// the APF's and DWA's default.
+    pub goal_tolerance: Option<f64>,
     /// Local planner of `frontier`.
     pub local: LocalPlanner,
     /// Seed of every random stream.
@@ -300,15 +362,16 @@ pub struct PlannerConfig {
 }
 
 impl PlannerConfig {
-    /// Defaults for planner `name`.
-    pub fn new(name: &str) -> Self {
+    /// Defaults for planner `kind`.
+    pub fn new(kind: PlannerKind) -> Self {
         Self {
-            name: name.to_owned(),
+            kind,
             goal: None,
+            goal_tolerance: None,
             local: LocalPlanner::default(),
             seed: 0,
             // DWA keeps its own margin (0.1 m); the reactive layer is then the last resort only.
-            bounce_back: if matches!(name, "dwa" | "frontier") {
+            bounce_back: if matches!(kind, PlannerKind::Dwa | PlannerKind::Frontier) {
                 BounceBackConfig {
                     d_th: 0.05,
                     d_release: 0.12,
@@ -327,9 +390,9 @@ impl PlannerConfig {
     }
 }
 
-/// Builds the configured planner inside the bounce-back layer (algorithms §4): `random-walk` (§3),
-/// `apf` (§1) and `dwa` (§4.2) toward `config.goal` (an error naming `--goal X,Y` without one),
-/// `frontier` (§5) with `config.local` following the path.
+/// Builds the configured planner inside the bounce-back layer (algorithms §4) inside
+/// [`Limited`]: `random-walk` (§3), `apf` (§1) and `dwa` (§4.2) toward `config.goal` (an error
+/// naming `--goal X,Y` without one), `frontier` (§5) with `config.local` following the path.
 pub fn build_planner(
     config: &PlannerConfig,
     limits: RobotLimits,
@@ -339,83 +402,79 @@ pub fn build_planner(
             .goal
             .filter(|g| g.0.is_finite() && g.1.is_finite())
             .map(|g| [g.0, g.1])
-            .ok_or_else(|| PlanningError::MissingGoal {
-                name: config.name.clone(),
-            })
+            .ok_or(PlanningError::MissingGoal { kind: config.kind })
     };
     let bb = config.bounce_back;
-    // `apf` / `dwa` with another planner re-planning after a bounce.
-    let primary = match config.name.as_str() {
-        "apf" => Some(LocalPlanner::Apf),
-        "dwa" => Some(LocalPlanner::Dwa),
-        _ => None,
-    };
-    if let (Some(primary), Some(with)) = (primary, config.replan_with)
-        && with != primary
-    {
-        return Ok(Box::new(BounceBack::new(
-            GoalSeeker::new(
-                limits,
-                goal()?,
-                primary,
-                with,
-                config.replan_time,
-                config.dwa,
-                config.apf,
-                config.seed,
-            ),
-            limits,
-            bb,
-        )));
+    // The goal seekers stop where the world counts the goal as reached.
+    let (mut apf, mut dwa) = (config.apf, config.dwa);
+    if let Some(t) = config.goal_tolerance.filter(|t| t.is_finite() && *t > 0.0) {
+        apf.goal_tolerance = t;
+        dwa.goal_tolerance = t;
     }
-    Ok(match config.name.as_str() {
-        "random-walk" => Box::new(BounceBack::new(
-            RandomWalk::new(limits, config.random_walk, config.seed),
-            limits,
-            bb,
-        )),
-        "apf" => Box::new(BounceBack::new(
-            Apf::new(limits, config.apf, goal()?, config.seed),
-            limits,
-            bb,
-        )),
-        "dwa" => Box::new(BounceBack::new(
-            Dwa::new(limits, config.dwa, goal()?),
-            limits,
-            bb,
-        )),
-        "frontier" => Box::new(BounceBack::new(
-            FrontierExplorer::new(
+    let primary = match config.kind {
+        PlannerKind::Apf => LocalPlanner::Apf,
+        PlannerKind::Dwa => LocalPlanner::Dwa,
+        PlannerKind::RandomWalk => {
+            let walk = RandomWalk::new(limits, config.random_walk, config.seed);
+            return Ok(stack(walk, limits, bb));
+        }
+        PlannerKind::Frontier => {
+            let explorer = FrontierExplorer::new(
                 limits,
                 config.frontier,
                 config.local,
                 config.dwa,
                 config.apf,
                 config.seed,
-            ),
-            limits,
-            bb,
-        )),
-        _ => {
-            return Err(PlanningError::UnknownPlanner {
-                name: config.name.clone(),
-            });
+            );
+            return Ok(stack(explorer, limits, bb));
         }
+    };
+    // `apf` / `dwa`, with another planner re-planning after a bounce if so configured.
+    Ok(match config.replan_with {
+        Some(with) if with != primary => {
+            let seeker = GoalSeeker::new(
+                limits,
+                goal()?,
+                primary,
+                with,
+                config.replan_time,
+                dwa,
+                apf,
+                config.seed,
+            );
+            stack(seeker, limits, bb)
+        }
+        _ => match primary {
+            LocalPlanner::Apf => stack(Apf::new(limits, apf, goal()?, config.seed), limits, bb),
+            LocalPlanner::Dwa => stack(Dwa::new(limits, dwa, goal()?), limits, bb),
+        },
     })
 }
 
-/// Build the configured planner by name with every default and no goal (kept for callers that
-/// have only a name: `apf` and `dwa` then fail with [`PlanningError::MissingGoal`]); an unknown
-/// name is an error listing the known ones.
-pub fn planner_by_name(
-    name: &str,
+/// `inner` inside the bounce-back layer inside [`Limited`].
+fn stack<P: Planner + 'static>(
+    inner: P,
+    limits: RobotLimits,
+    bounce_back: BounceBackConfig,
+) -> Box<dyn Planner> {
+    Box::new(Limited::new(
+        BounceBack::new(inner, limits, bounce_back),
+        limits,
+    ))
+}
+
+/// Builds planner `kind` with every default and no goal (`apf` and `dwa` then fail with
+/// [`PlanningError::MissingGoal`]).
+pub fn planner_by_kind(
+    kind: PlannerKind,
     limits: RobotLimits,
     seed: u64,
 ) -> Result<Box<dyn Planner>, PlanningError> {
     build_planner(
         &PlannerConfig {
             seed,
-            ..PlannerConfig::new(name)
+            ..PlannerConfig::new(kind)
         },
         limits,
     )
@@ -445,16 +504,23 @@ mod tests {
         }
     }
 
+    /// Every kind builds (the goal seekers with a goal, and say which kind lacks one without),
+    /// and the stack it builds reports that kind.
     #[test]
-    fn unknown_planner_lists_the_known_ones() {
-        let err = planner_by_name("teleport", limits(), 1).err();
-        let text = err.map(|e| e.to_string()).unwrap_or_default();
-        assert!(
-            text.contains("teleport") && text.contains("random-walk"),
-            "{text}"
-        );
-        let p = planner_by_name("random-walk", limits(), 1);
-        assert_eq!(p.map(|p| p.name()).ok(), Some("random-walk"));
+    fn every_kind_builds_and_reports_its_kind() {
+        for &kind in PlannerKind::ALL {
+            let built = planner_by_kind(kind, limits(), 1);
+            if kind.needs_goal() {
+                let err = built.err().map(|e| e.to_string()).unwrap_or_default();
+                assert!(err.contains(kind.name()) && err.contains("--goal"), "{err}");
+            }
+            let config = PlannerConfig {
+                goal: Some((1.0, 2.0)),
+                ..PlannerConfig::new(kind)
+            };
+            let p = build_planner(&config, limits()).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(p.kind(), kind);
+        }
     }
 
     #[test]

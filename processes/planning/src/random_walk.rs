@@ -2,7 +2,7 @@
 //! its coverage (§3.3), and [`RandomWalk`], the robot-level planner built on it.
 
 use crate::obstacles::{corridor_clear, segment_free};
-use crate::{Command, Planner, PlannerInput, PlanningError, RobotLimits, stop_command, usable};
+use crate::{Command, Planner, PlannerInput, PlanningError, RobotLimits, usable};
 use core::f64::consts::{FRAC_PI_4, SQRT_2};
 use mole_types::{MODE_EXPLORE, Pose2, wrap_angle};
 use rand::{Rng, RngExt, SeedableRng};
@@ -296,7 +296,6 @@ pub struct RandomWalk {
     direction: usize,
     started_tick: u64,
     turning: bool,
-    prev: Command,
     picks: u64,
     fallbacks: u64,
     /// Obstacles the reactive layer met lately: (where, world heading, draws left).
@@ -318,7 +317,6 @@ impl RandomWalk {
             direction: 0,
             started_tick: 0,
             turning: true,
-            prev: Command::STOP,
             picks: 0,
             fallbacks: 0,
             hints: [([0.0; 2], 0.0, 0); HINTS],
@@ -435,15 +433,14 @@ impl RandomWalk {
 }
 
 impl Planner for RandomWalk {
-    fn name(&self) -> &'static str {
-        "random-walk"
+    fn kind(&self) -> PlannerKind {
+        PlannerKind::RandomWalk
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {
         if !usable(input) {
             self.waypoint = None;
-            self.prev = stop_command(&self.limits, &self.prev, input.dt);
-            return self.prev;
+            return Command::STOP;
         }
         let p = input.pose;
         if input.tick < self.started_tick {
@@ -464,13 +461,11 @@ impl Planner for RandomWalk {
             Some(wp) => self.control(p, wp),
             None => (0.0, 0.0),
         };
-        let (v, omega) = self.limits.limit(&self.prev, v, omega, input.dt);
-        self.prev = Command {
+        Command {
             v,
             omega,
             mode: MODE_EXPLORE,
-        };
-        self.prev
+        }
     }
 
     fn replan(&mut self) {

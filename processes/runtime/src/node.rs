@@ -609,7 +609,7 @@ impl PayloadLayout {
     /// The layout of this process's message type.
     fn of<M: Message>() -> PayloadLayout {
         PayloadLayout {
-            type_name: M::TYPE_NAME.to_string(),
+            type_name: M::wire_type_name().to_string(),
             size: core::mem::size_of::<M>(),
             alignment: core::mem::align_of::<M>(),
         }

@@ -263,7 +263,7 @@ impl<M: Message> Subscriber<M> {
                     tracing::warn!(
                         topic = self.topic,
                         "dropped an invalid {}: {why}",
-                        M::TYPE_NAME
+                        M::wire_type_name()
                     );
                 }
                 continue;
