@@ -7,6 +7,7 @@
 //! make sense, and a process drops (and counts) whatever does not.
 
 pub mod control;
+pub mod env;
 pub mod geometry;
 pub mod kinds;
 pub mod layout;
