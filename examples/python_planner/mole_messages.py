@@ -76,7 +76,7 @@ class SensorSpec(ctypes.Structure):
         ("beacon_bearing_std", ctypes.c_double),
         ("fix_std", ctypes.c_double),
         ("fix_period_ticks", ctypes.c_uint32),
-        ("_pad", ctypes.c_uint32),
+        ("beacons_anonymous", ctypes.c_uint32),
     ]
 
     @classmethod
@@ -690,6 +690,7 @@ MODE_GOAL = 3
 MODE_STALLED = 4
 MODE_ESCAPE = 5
 MODE_DONE = 6
+MODE_ARRIVED = 7
 STATUS_HAS_GOAL = 1
 STATUS_HAS_FRONTIER = 2
 STATUS_EXPLORATION_COMPLETE = 4

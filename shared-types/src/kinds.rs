@@ -172,6 +172,18 @@ choice! {
     }
 }
 
+impl EndReason {
+    /// The end a planner asks for with its command's mode: at its goal (`MODE_ARRIVED`) or
+    /// nothing left to explore (`MODE_DONE`); `None` while it goes on.
+    pub const fn asked_by_planner(mode: u32) -> Option<EndReason> {
+        match mode {
+            crate::MODE_ARRIVED => Some(EndReason::GoalReached),
+            crate::MODE_DONE => Some(EndReason::ExplorationComplete),
+            _ => None,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -106,7 +106,7 @@ pub fn all() -> Vec<TypeLayout> {
         layout!(SensorSpec, type_name::<SensorSpec>();
             lidar_beams, tactile_sensors, lidar_range_max, lidar_fov, lidar_range_std,
             tactile_stiffness, tactile_force_std, odom_v_std, odom_omega_std, beacon_range_max,
-            beacon_range_std, beacon_bearing_std, fix_std, fix_period_ticks, _pad),
+            beacon_range_std, beacon_bearing_std, fix_std, fix_period_ticks, beacons_anonymous),
         layout!(Square, type_name::<Square>(); cx, cy, side),
         layout!(BeaconSite, type_name::<BeaconSite>(); x, y, id, _pad),
         layout!(Contact, type_name::<Contact>(); px, py, nx, ny, depth),
@@ -208,6 +208,7 @@ fn constants() -> Vec<(String, u64)> {
         MODE_STALLED,
         MODE_ESCAPE,
         MODE_DONE,
+        MODE_ARRIVED,
         STATUS_HAS_GOAL,
         STATUS_HAS_FRONTIER,
         STATUS_EXPLORATION_COMPLETE,

@@ -9,13 +9,16 @@
 pub mod control;
 pub mod env;
 pub mod geometry;
+#[macro_use]
 pub mod kinds;
+pub mod graph;
 pub mod layout;
 pub mod messages;
 pub mod topics;
 
 pub use control::*;
 pub use geometry::*;
+pub use graph::{GRAPH, Role, RoleSpec};
 pub use kinds::{ClockMode, EndReason, EstimatorKind, PlannerKind, UnknownChoice};
 pub use messages::*;
 pub use topics::Topic;

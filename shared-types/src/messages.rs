@@ -95,7 +95,9 @@ pub struct SensorSpec {
     /// Position-fix noise σ (m) and period in ticks (0: no fix).
     pub fix_std: f64,
     pub fix_period_ticks: u32,
-    pub _pad: u32,
+    /// 1: beacon readings hide the ids (`LANDMARK_ANONYMOUS`), so a SLAM estimator must
+    /// associate them itself; 0: each reading names its beacon.
+    pub beacons_anonymous: u32,
 }
 
 /// `world/map`: everything static about the world, published once with history 1.
@@ -158,6 +160,9 @@ impl Message for WorldMap {
         )?;
         if self.has_goal > 1 {
             return Err(Invalid::UnknownCode("has_goal"));
+        }
+        if self.sensors.beacons_anonymous > 1 {
+            return Err(Invalid::UnknownCode("sensors.beacons_anonymous"));
         }
         for (field, v) in [
             ("arena_width", self.arena_width),
@@ -458,7 +463,8 @@ impl Message for Beacons {
             if r.range < 0.0 {
                 return Err(Invalid::OutOfRange("readings.range"));
             }
-            if r.id as usize >= MAX_BEACONS {
+            // A beacon's index in the map, or LANDMARK_ANONYMOUS when the scenario hides ids.
+            if r.id as usize >= MAX_BEACONS && r.id != LANDMARK_ANONYMOUS {
                 return Err(Invalid::OutOfRange("readings.id"));
             }
         }
@@ -722,8 +728,11 @@ pub const MODE_BOUNCE_BACK: u32 = 2;
 pub const MODE_GOAL: u32 = 3;
 pub const MODE_STALLED: u32 = 4;
 pub const MODE_ESCAPE: u32 = 5;
+/// Exploration is complete: no reachable frontier is worth its cost (algorithms §5).
 pub const MODE_DONE: u32 = 6;
-const MODE_LAST: u32 = MODE_DONE;
+/// A goal-seeking planner (apf, dwa) has its estimated pose within the goal tolerance.
+pub const MODE_ARRIVED: u32 = 7;
+const MODE_LAST: u32 = MODE_ARRIVED;
 
 /// `planning/cmd`: the velocity command (v, ω) for the next step.
 #[repr(C)]
@@ -1045,6 +1054,7 @@ mod tests {
         assert_eq!(bytemuck::zeroed_box::<Fix>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Pose>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Particles>().validate(), Ok(()));
+        assert_eq!(bytemuck::zeroed_box::<Landmarks>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Cmd>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<PlanStatus>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Tick>().validate(), Ok(()));
@@ -1055,6 +1065,16 @@ mod tests {
             bytemuck::zeroed_box::<Grid>().validate(),
             Err(Invalid::OutOfRange("resolution"))
         );
+    }
+
+    #[test]
+    fn a_beacon_reading_names_a_beacon_of_the_map_or_none() {
+        let mut beacons: Box<Beacons> = bytemuck::zeroed_box();
+        beacons.n_readings = 1;
+        beacons.readings[0].id = LANDMARK_ANONYMOUS;
+        assert_eq!(beacons.validate(), Ok(()), "an anonymous reading");
+        beacons.readings[0].id = MAX_BEACONS as u32;
+        assert_eq!(beacons.validate(), Err(Invalid::OutOfRange("readings.id")));
     }
 
     #[test]
