@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """mole's planning role in Python: a wall-avoiding wanderer.
 
-world/map once, then localization/pose and sensing/scan every step → planning/cmd and
-planning/status, through iceoryx2's Python package and the ctypes layouts of mole_messages.py
-(generated from the Rust types). Run it in the place of the Rust planner, from the repository's
-root:
+world/map once, then localization/pose (the trigger), sensing/scan (step k) and mapping/grid
+(step k−1, unused: awaited in lockstep so that mapping keeps up, as the Rust planner does) →
+planning/cmd and planning/status, through iceoryx2's Python package and the ctypes layouts of
+mole_messages.py (generated from the Rust types). Run it in the place of the Rust planner, from
+the repository's root:
 
     mole up --swap planning="python3 examples/python_planner/planner.py"
 """
@@ -14,7 +15,7 @@ import random
 import sys
 
 import mole_messages as msg
-from mole_runtime import BadInput, Node, common_args
+from mole_runtime import BadInput, Node, Rule, common_args
 
 
 class Wanderer:
@@ -28,9 +29,18 @@ class Wanderer:
         self.stop_at, self.clear_at = robot.radius + 0.3, robot.radius + 0.6
         self.turning, self.drift = 0, 0.0
         self.random = random.Random(seed)
+        self.last = 0.0, 0.0, msg.MODE_EXPLORE
 
     def step(self, scan):
-        """(v, ω, mode) for one step, from a scan in the robot frame."""
+        """(v, ω, mode) for one step, from a scan in the robot frame; without a scan of this
+        step (realtime: it missed the pose), the command of the step before."""
+        if scan is None:
+            return self.last
+        self.last = self.decide(scan)
+        return self.last
+
+    def decide(self, scan):
+        """(v, ω, mode) from a scan in the robot frame."""
         ahead, left, right = math.inf, 0.0, 0.0
         for i, r in enumerate(scan.ranges[: scan.n_beams]):
             a = scan.angle_min + i * scan.angle_increment
@@ -69,36 +79,15 @@ def valid_scan(scan):
 
 def run():
     namespace, lockstep, seed = common_args()
-    node = Node("planning", namespace, lockstep)
-    map_sub = node.subscriber(msg.WORLD_MAP, valid_map)
-    pose_sub = node.subscriber(msg.LOCALIZATION_POSE, lambda p: finite(p.x, p.y, p.theta))
-    scan_sub = node.subscriber(msg.SENSING_SCAN, valid_scan)
-    grid_sub = node.subscriber(msg.MAPPING_GRID, lambda g: g.width * g.height <= len(g.cells))
-    cmd_pub = node.publisher(msg.PLANNING_CMD)
-    status_pub = node.publisher(msg.PLANNING_STATUS)
-    node.ready()
+    node = Node("planning", namespace, lockstep, seed)
+    node.trigger(msg.LOCALIZATION_POSE, lambda p: finite(p.x, p.y, p.theta))
+    scan_in = node.input(msg.SENSING_SCAN, Rule.SAME_TICK, valid_scan)
+    node.input(msg.MAPPING_GRID, Rule.PREVIOUS_TICK, lambda g: g.width * g.height <= len(g.cells))
+    cmd_out = node.publisher(msg.PLANNING_CMD)
+    status_out = node.publisher(msg.PLANNING_STATUS)
 
-    wanderer, last_tick = None, None
-    while node.wait():
-        if map_sub.update() and wanderer is None:
-            world = map_sub.latest()
-            wanderer = Wanderer(world.robot, world.seed if seed is None else seed)
-            node.log("map received")
-        map_sub.release()
-        pose_sub.update()
-        scan_sub.update()
-        grid_sub.update()
-        # The Rust planner's rule for a step: a pose of a new tick triggers it; lockstep also
-        # waits for the scan and the mapping/grid of that tick (the grid unused here, but
-        # awaited so that mapping keeps up with every step and the maps are deterministic).
-        tick = pose_sub.tick()
-        inputs = [scan_sub.tick(), grid_sub.tick()] if lockstep else [scan_sub.tick()]
-        if wanderer is None or tick is None or (last_tick is not None and tick <= last_tick):
-            continue
-        if None in inputs or (lockstep and any(t != tick for t in inputs)):
-            continue
-        last_tick = tick
-        v, omega, mode = wanderer.step(scan_sub.latest())
+    def act(wanderer, step):
+        v, omega, mode = wanderer.step(step.get(scan_in))
 
         def fill_cmd(cmd):
             cmd.v, cmd.omega, cmd.mode = v, omega, mode
@@ -110,11 +99,10 @@ def run():
 
         # origin_ns travels on: the world measures the loop latency from it. The status
         # follows the command, as with the Rust planner.
-        origin_ns = pose_sub.latest().header.origin_ns
-        cmd_pub.publish(tick, origin_ns, fill_cmd)
-        status_pub.publish(tick, origin_ns, fill_status)
-        node.steps += 1
-    node.close()
+        cmd_out.publish(step.tick, step.origin_ns, fill_cmd)
+        status_out.publish(step.tick, step.origin_ns, fill_status)
+
+    node.run(valid_map, lambda start: Wanderer(start.map.robot, start.seed), act)
 
 
 def main():

@@ -16,6 +16,7 @@ fn main() {
         mode,
         rate_hz: 100.0,
         seed: None,
+        takeover: false,
     };
     let a2 = args.clone();
     let echo = std::thread::spawn(move || {

@@ -17,6 +17,7 @@ fn main() {
         mode,
         rate_hz: 100.0,
         seed: None,
+        takeover: false,
     };
     let ctx =
         Context::with_shutdown_flag("statsdump", &args, Arc::new(AtomicBool::new(false))).unwrap();

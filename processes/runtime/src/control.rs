@@ -1,7 +1,9 @@
 //! `stack/control`: the launcher serves it, `mole swap` / `mole stop` / `mole status` call it.
 //! An iceoryx2 request-response service, like every other link of the stack (docs/architecture.md).
 
-use crate::node::{Context, RuntimeError, now_ns};
+use crate::context::Context;
+use crate::error::RuntimeError;
+use crate::time::now_ns;
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::client::Client;
 use iceoryx2::port::server::Server;
@@ -140,7 +142,7 @@ pub struct ControlClient {
 impl ControlClient {
     /// Connects to the launcher of `namespace`; fails with a sentence when none runs.
     pub fn connect(namespace: &str) -> Result<ControlClient, RuntimeError> {
-        let node = crate::node::create_node(namespace, "control")?;
+        let node = crate::admin::create_node(namespace, "control")?;
         let service = control_service(&node, namespace, false)?;
         let client = service
             .client_builder()

@@ -14,20 +14,30 @@
 //!   `stack/stats` once a second.
 //! - `stack/control` (request-response) carries `mole swap` / `mole stop` to the launcher.
 
+mod admin;
 mod alloc_counter;
 mod clock;
+mod context;
 mod control;
-mod node;
+mod error;
+mod observe;
 mod ports;
+mod source;
 mod stats;
+mod step;
+mod time;
+mod waitset;
 
+pub use admin::{HALF_MADE_AGE, cleanup_dead_nodes, list_topics, live_nodes_in_namespace};
 pub use alloc_counter::{CountingAllocator, allocations_during};
 pub use clock::{ClockMode, StepGate, parse_point};
+pub use context::{CommonArgs, Context, STUCK_CONSUMER};
 pub use control::{ControlCall, ControlClient, ControlServer};
-pub use node::{
-    Attachment, BadInput, CommonArgs, Context, DEFAULT_SPIN_US, RuntimeError, STUCK_CONSUMER,
-    WaitSet, Wake, cleanup_dead_nodes, exit_code, init_tracing, list_topics,
-    live_nodes_in_namespace, now_ns,
-};
+pub use error::{BadInput, RuntimeError, exit_code};
+pub use observe::Observation;
 pub use ports::{Publisher, Subscriber, Waker};
+pub use source::{ClockEvent, Flow, LOCKSTEP_RESEND, REPLY_TIMEOUT};
 pub use stats::StatsRegistry;
+pub use step::{In, Order, Process, Rule, Start, Step, TAKEOVER_GRACE, Trigger, rule_table};
+pub use time::{init_tracing, now_ns};
+pub use waitset::{Attachment, WaitSet, Wake};

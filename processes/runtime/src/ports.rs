@@ -1,8 +1,9 @@
 //! Typed ports: a publisher writes a loaned sample in place and signals the topic's event; a
 //! subscriber drains its queue, validates every message, and keeps the newest one borrowed.
 
-use crate::node::{RuntimeError, now_ns};
+use crate::error::RuntimeError;
 use crate::stats::PortHandle;
+use crate::time::now_ns;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
@@ -86,7 +87,7 @@ impl<M: Message> Publisher<M> {
 /// A typed subscriber bound to one topic.
 pub struct Subscriber<M: Message> {
     pub(crate) topic: &'static str,
-    /// Shared with the [`Waker`], which probes it while a WaitSet anticipates an input.
+    /// Shared with the [`Waker`], whose WaitSet looks at its queue when a signal went missing.
     pub(crate) subscriber: Rc<iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()>>,
     /// `None` for a passive subscriber: no publisher signals it.
     pub(crate) listener: Option<Rc<Listener<ipc::Service>>>,

@@ -14,6 +14,7 @@ fn args(test: &str, mode: ClockMode) -> CommonArgs {
         mode,
         rate_hz: 100.0,
         seed: None,
+        takeover: false,
     }
 }
 

@@ -1,0 +1,356 @@
+//! Node administration: creating a process's node, cleaning what dead nodes left, listing the
+//! live nodes and the topics of a namespace.
+
+use crate::error::RuntimeError;
+use crate::time::set_iceoryx_log_level;
+use iceoryx2::node::{DeadNodeView, NodeCleanupFailure, NodeView};
+use iceoryx2::prelude::*;
+use std::collections::{BTreeMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// The node `mole/<namespace>/<role>`, iceoryx2's signal handling disabled, and its sweep of
+/// every dead node when a node is created or dropped too: a process killed during that sweep, or
+/// whose sweep fails (iceoryx2 then holds the dead node's cleaner lock until the process ends),
+/// would block the node's cleaning. The launcher sweeps instead ([`cleanup_dead_nodes`]).
+pub(crate) fn create_node(namespace: &str, role: &str) -> Result<Node<ipc::Service>, RuntimeError> {
+    set_iceoryx_log_level();
+    let node_name = format!("mole/{namespace}/{role}");
+    let name: NodeName = node_name
+        .as_str()
+        .try_into()
+        .map_err(|e| RuntimeError::Name(node_name.clone(), format!("{e:?}")))?;
+    let mut config = Config::global_config().clone();
+    config.global.node.cleanup_dead_nodes_on_creation = false;
+    config.global.node.cleanup_dead_nodes_on_destruction = false;
+    NodeBuilder::new()
+        .name(&name)
+        .config(&config)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| RuntimeError::Node(node_name, format!("{e:?}")))
+}
+
+/// How long an iceoryx2 record (a node's files, a service's static config, a listener's event)
+/// may stay half-made before its maker counts as dead. iceoryx2 makes and seals each within
+/// milliseconds, so one still half-made after this long was left by a process killed making it.
+pub const HALF_MADE_AGE: Duration = Duration::from_secs(5);
+
+/// Where Linux keeps POSIX shared memory, iceoryx2's segments among it.
+const SHARED_MEMORY_DIR: &str = "/dev/shm";
+
+/// Removes the resources of every dead node (a crashed earlier run, a killed process), so they
+/// never block a new one, and what a process killed while making a node, a service or a
+/// listener left, which iceoryx2 does not see. Returns how many of both were cleaned.
+pub fn cleanup_dead_nodes() -> usize {
+    let config = Config::global_config();
+    let nodes_dir = std_path(&config.global.node_dir());
+    // First, so that iceoryx2 finds a half-made service segment gone, not unreadable.
+    let half_made_segments = remove_half_made_shared_memory(config);
+    let mut listed = HashSet::new();
+    let mut dead = Vec::new();
+    let result = Node::<ipc::Service>::list(config, |state| {
+        listed.insert(state.node_id().value());
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = result {
+        tracing::warn!("cannot list nodes: {e:?}");
+        return 0;
+    }
+    let mut cleaned = 0;
+    let mut failed = 0;
+    for view in dead {
+        let name = view.details().as_ref().map(|d| d.name().to_string());
+        match remove_dead_node(view, config) {
+            Ok(true) => {
+                cleaned += 1;
+                tracing::info!(node = ?name, "cleaned the resources of a dead node");
+            }
+            Ok(false) => tracing::debug!(node = ?name, "another process cleans a dead node"),
+            Err(e) => {
+                failed += 1;
+                tracing::debug!(node = ?name, "cannot clean a dead node: {e:?}");
+            }
+        }
+    }
+    let half_made = half_made_segments
+        + remove_half_made_nodes(&nodes_dir, &config.global.prefix, &listed)
+        + remove_half_made_services(config)
+        + remove_orphaned_listener_events(config);
+    if half_made > 0 {
+        tracing::info!(
+            half_made,
+            "removed what processes killed while making a node, a service or a listener left"
+        );
+    }
+    if failed > 0 {
+        tracing::warn!(
+            failed,
+            "dead nodes whose resources iceoryx2 could not clean (RUST_LOG=debug names them)"
+        );
+    }
+    cleaned + half_made
+}
+
+/// Cleans one dead node; `Ok(false)` when another process did or is doing it. A file its process
+/// never sealed (iceoryx2 seals each by making it read-only) is one it was killed while writing:
+/// iceoryx2 seals a service or port tag before it uses the service or makes the port, so such a
+/// tag stands for nothing, but iceoryx2 does not see it and so cannot remove the node's directory.
+fn remove_dead_node(
+    view: DeadNodeView<ipc::Service>,
+    config: &Config,
+) -> Result<bool, NodeCleanupFailure> {
+    let id = view.id().value();
+    let nodes_dir = std_path(&config.global.node_dir());
+    let node_dir = nodes_dir.join(id.to_string());
+    for file in entries(&node_dir) {
+        if is_unsealed(&file) {
+            remove(&file);
+        }
+    }
+    match view.try_remove_stale_resources() {
+        Ok(()) => Ok(true),
+        Err(NodeCleanupFailure::ResourcesAlreadyCleanedUp) => Ok(false),
+        // A cleaner removes the node's directory before its monitor; a monitor left on its own
+        // for long is one whose cleaner was killed in between, and iceoryx2 waits for it forever.
+        Err(NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode) => {
+            let monitor = monitor_files(&nodes_dir, &config.global.prefix, id);
+            if node_dir.exists() || !all_older_than(&monitor, HALF_MADE_AGE) {
+                return Ok(false);
+            }
+            monitor.iter().for_each(|f| remove(f));
+            Ok(true)
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// Removes iceoryx2's shared-memory segments (a service's dynamic config, a port's data, a
+/// listener's event) that their creator never finished, once old enough. iceoryx2 makes a
+/// segment write-only, initialises it and only then lets its owner read it; nobody can open one
+/// before, so a segment still write-only after this long is only in the way: iceoryx2 cannot open
+/// it to clean it, and a service whose dynamic config it is can be neither opened nor removed.
+/// Returns how many were removed.
+fn remove_half_made_shared_memory(config: &Config) -> usize {
+    use std::os::unix::fs::PermissionsExt;
+    let prefix = String::from_utf8_lossy(config.global.prefix.as_bytes()).into_owned();
+    let half_made: Vec<PathBuf> = entries(Path::new(SHARED_MEMORY_DIR))
+        .into_iter()
+        .filter(|path| {
+            path.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with(&prefix))
+                && std::fs::symlink_metadata(path)
+                    .is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o400 == 0)
+                && all_older_than(std::slice::from_ref(path), HALF_MADE_AGE)
+        })
+        .collect();
+    half_made.iter().for_each(|p| remove(p));
+    half_made.len()
+}
+
+/// Removes the events (shared memory named after their listener port) of listeners that no
+/// node has any more, once old enough. A listener's port tag is made before its event, and
+/// iceoryx2 removes a listener's event when it removes the listener from its service, so it
+/// leaves the event of a listener killed after making it but before joining the service.
+/// Returns how many were removed.
+fn remove_orphaned_listener_events(config: &Config) -> usize {
+    let prefix = &config.global.prefix;
+    let ports: HashSet<u128> = entries(&std_path(&config.global.node_dir()))
+        .iter()
+        .flat_map(|node| entries(node))
+        .filter_map(|tag| record_id(&tag, prefix, &config.global.node.port_tag_suffix))
+        .collect();
+    let prefix = String::from_utf8_lossy(prefix.as_bytes()).into_owned();
+    let event = String::from_utf8_lossy(config.global.service.event_connection_suffix.as_bytes());
+    let orphans: Vec<PathBuf> = entries(Path::new(SHARED_MEMORY_DIR))
+        .into_iter()
+        .filter(|path| {
+            let listener = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .filter(|n| n.starts_with(&prefix))
+                .and_then(|n| n.split_once(event.as_ref()))
+                .and_then(|(name, _)| name.rsplit('_').next())
+                .and_then(|id| id.parse::<u128>().ok());
+            listener.is_some_and(|id| !ports.contains(&id))
+                && all_older_than(std::slice::from_ref(path), HALF_MADE_AGE)
+        })
+        .collect();
+    orphans.iter().for_each(|p| remove(p));
+    orphans.len()
+}
+
+/// The id in a record's file name `<prefix><id><suffix>`.
+fn record_id(file: &Path, prefix: &FileName, suffix: &FileName) -> Option<u128> {
+    let name = file.file_name()?.to_str()?;
+    let prefix = std::str::from_utf8(prefix.as_bytes()).ok()?;
+    let suffix = std::str::from_utf8(suffix.as_bytes()).ok()?;
+    name.strip_prefix(prefix)?
+        .strip_suffix(suffix)?
+        .parse()
+        .ok()
+}
+
+/// Removes the records (directory and monitor files) of nodes iceoryx2 does not list, which are
+/// those killed before their monitor was sealed, once they are old enough that no live process
+/// can still be creating them. Returns how many were removed.
+fn remove_half_made_nodes(nodes_dir: &Path, prefix: &FileName, listed: &HashSet<u128>) -> usize {
+    let prefix = String::from_utf8_lossy(prefix.as_bytes()).into_owned();
+    let mut records: BTreeMap<u128, Vec<PathBuf>> = BTreeMap::new();
+    for path in entries(nodes_dir) {
+        let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let id = name
+            .strip_prefix(&prefix)
+            .and_then(|rest| rest.split_once('.'))
+            .map_or(name, |(id, _)| id);
+        if let Ok(id) = id.parse::<u128>()
+            && !listed.contains(&id)
+        {
+            records.entry(id).or_default().push(path);
+        }
+    }
+    let mut removed = 0;
+    for paths in records.values() {
+        let mut all: Vec<PathBuf> = paths.clone();
+        all.extend(paths.iter().flat_map(|p| entries(p)));
+        if all_older_than(&all, HALF_MADE_AGE) {
+            paths.iter().for_each(|p| remove(p));
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// Removes the static configs of services whose creator was killed before it sealed them, once
+/// old enough. iceoryx2 seals a service's static config before it makes anything else of the
+/// service, so nothing else exists for it; left in place, it makes every later attempt to open or
+/// create the service wait and fail ("hangs in creation"). Returns how many were removed.
+fn remove_half_made_services(config: &Config) -> usize {
+    let service = &config.global.service;
+    let prefix = String::from_utf8_lossy(config.global.prefix.as_bytes()).into_owned();
+    let suffix = String::from_utf8_lossy(service.static_config_storage_suffix.as_bytes());
+    let half_made: Vec<PathBuf> = entries(&std_path(&config.global.service_dir()))
+        .into_iter()
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with(&prefix) && n.ends_with(suffix.as_ref()))
+                && is_unsealed(p)
+                && all_older_than(std::slice::from_ref(p), HALF_MADE_AGE)
+        })
+        .collect();
+    half_made.iter().for_each(|p| remove(p));
+    half_made.len()
+}
+
+/// The monitor files (`<prefix><id>.node_monitor…`) of node `id`.
+fn monitor_files(nodes_dir: &Path, prefix: &FileName, id: u128) -> Vec<PathBuf> {
+    let start = format!("{}{id}.", String::from_utf8_lossy(prefix.as_bytes()));
+    entries(nodes_dir)
+        .into_iter()
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with(&start))
+        })
+        .collect()
+}
+
+/// The entries of a directory; none when it is not one (or is gone).
+fn entries(dir: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(dir)
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default()
+}
+
+/// Whether a file is still writable by its owner: iceoryx2 creates its records writable and
+/// makes them read-only once written.
+fn is_unsealed(file: &Path) -> bool {
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::symlink_metadata(file)
+        .is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o200 != 0)
+}
+
+/// Whether every path was last changed more than `age` ago (one that vanished meanwhile counts
+/// as old: its maker is done with it).
+fn all_older_than(paths: &[PathBuf], age: Duration) -> bool {
+    paths.iter().all(|p| {
+        std::fs::symlink_metadata(p)
+            .and_then(|m| m.modified())
+            .map_or(true, |t| t.elapsed().is_ok_and(|e| e > age))
+    })
+}
+
+/// Removes a file or a directory tree; one already gone (another cleaner) is fine, one that
+/// cannot be removed (another user's) is said.
+fn remove(path: &Path) {
+    let result = if path.is_dir() {
+        std::fs::remove_dir_all(path)
+    } else {
+        std::fs::remove_file(path)
+    };
+    if let Err(e) = result
+        && e.kind() != std::io::ErrorKind::NotFound
+    {
+        tracing::warn!(path = %path.display(), "cannot remove what a dead process left: {e}");
+    }
+}
+
+/// iceoryx2's path as a standard one.
+fn std_path(path: &iceoryx2::prelude::Path) -> PathBuf {
+    use std::os::unix::ffi::OsStrExt;
+    PathBuf::from(std::ffi::OsStr::from_bytes(path.as_bytes()))
+}
+
+/// Names of the live nodes of a namespace (`mole/<ns>/<role>`), e.g. to refuse a second stack.
+pub fn live_nodes_in_namespace(namespace: &str) -> Vec<String> {
+    let prefix = format!("mole/{namespace}/");
+    let mut names = Vec::new();
+    let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if let NodeState::Alive(view) = state
+            && let Some(details) = view.details()
+        {
+            let name = details.name().to_string();
+            if name.starts_with(&prefix) {
+                names.push(name);
+            }
+        }
+        CallbackProgression::Continue
+    });
+    names
+}
+
+/// The publish-subscribe services of a namespace as iceoryx2 lists them: `(topic, payload type
+/// name)`, sorted. Any tool that lists iceoryx2 services (`iox2 service list`) sees the same.
+pub fn list_topics(namespace: &str) -> Vec<(String, String)> {
+    use iceoryx2::service::Service as _;
+    use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
+    let prefix = format!("mole/{namespace}/");
+    let mut topics = Vec::new();
+    let result = ipc::Service::list(Config::global_config(), |details| {
+        let name = details.static_details.name().as_str();
+        if let Some(topic) = name.strip_prefix(&prefix)
+            && let MessagingPattern::PublishSubscribe(config) =
+                details.static_details.messaging_pattern()
+        {
+            let payload = config
+                .message_type_details()
+                .payload
+                .type_name()
+                .to_string();
+            topics.push((topic.to_string(), payload));
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = result {
+        tracing::warn!("cannot list services: {e:?}");
+    }
+    topics.sort();
+    topics
+}

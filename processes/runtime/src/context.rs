@@ -1,0 +1,475 @@
+//! The process's node, its ports' factory and its shutdown flag.
+
+use crate::admin::create_node;
+use crate::clock::ClockMode;
+use crate::error::RuntimeError;
+use crate::ports::{Publisher, Subscriber};
+use crate::stats::StatsRegistry;
+use crate::time::init_tracing;
+use crate::waitset::{WaitSet, Wake};
+use iceoryx2::prelude::*;
+use mole_types::{Message, Stats, Topic, env, topics};
+use std::rc::Rc;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// How often a process publishes its statistics.
+const STATS_PERIOD: Duration = Duration::from_secs(1);
+
+/// The arguments every process takes, from its command line or the environment the launcher
+/// sets (`mole_types::env`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct CommonArgs {
+    /// Namespace of the stack: services are `mole/<namespace>/<topic>`.
+    #[arg(long, env = env::NAMESPACE, default_value = "robot0")]
+    pub namespace: String,
+    /// Clock mode: realtime or lockstep.
+    #[arg(long, env = env::MODE, default_value = "realtime")]
+    pub mode: ClockMode,
+    /// World step rate in realtime mode (Hz).
+    #[arg(long, env = env::RATE_HZ, default_value_t = 100.0)]
+    pub rate_hz: f64,
+    /// Seed override (the scenario's seed otherwise).
+    #[arg(long, env = env::SEED)]
+    pub seed: Option<u64>,
+    /// Go on from the last output of the process this one replaces or restarts (set by the
+    /// launcher on a swap or a restart).
+    #[arg(long, env = env::TAKEOVER, default_value_t = false)]
+    pub takeover: bool,
+}
+
+type PubSubFactory<M> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, M, ()>;
+type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+
+/// One process's link to the stack: its node in the namespace, its statistics, its shutdown flag.
+pub struct Context {
+    node: Node<ipc::Service>,
+    namespace: String,
+    role: String,
+    mode: ClockMode,
+    rate_hz: f64,
+    seed: Option<u64>,
+    shutdown: Arc<AtomicBool>,
+    stats: StatsRegistry,
+    stats_publisher: Option<Publisher<Stats>>,
+    last_stats: Instant,
+    steps: u64,
+    takeover: bool,
+}
+
+/// Lockstep: how long a publisher waits for a subscriber whose queue is full before it drops
+/// the sample for that subscriber. Far above any real wait (µs to ms), below the launcher's
+/// hang detection, so a frozen consumer stalls the stack only until it is restarted.
+pub const STUCK_CONSUMER: Duration = Duration::from_secs(3);
+
+impl Context {
+    /// Initialises tracing and the Ctrl-C/SIGTERM handler and creates the node
+    /// `mole/<namespace>/<role>` with iceoryx2's own signal handling disabled. It does not sweep
+    /// dead nodes: the launcher does, before it starts the processes and after one dies, so a
+    /// process killed while starting is never one killed while cleaning up after others.
+    pub fn new(role: &str, args: &CommonArgs) -> Result<Context, RuntimeError> {
+        init_tracing(role);
+        let shutdown = Arc::new(AtomicBool::new(false));
+        let flag = shutdown.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+            .map_err(|e| RuntimeError::Signal(e.to_string()))?;
+        Self::with_shutdown_flag(role, args, shutdown)
+    }
+
+    /// As [`Context::new`], for a process (the launcher) that owns its signal handling.
+    pub fn with_shutdown_flag(
+        role: &str,
+        args: &CommonArgs,
+        shutdown: Arc<AtomicBool>,
+    ) -> Result<Context, RuntimeError> {
+        let node = create_node(&args.namespace, role)?;
+        let mut ctx = Context {
+            node,
+            namespace: args.namespace.clone(),
+            role: role.to_string(),
+            mode: args.mode,
+            rate_hz: args.rate_hz,
+            seed: args.seed,
+            shutdown,
+            stats: StatsRegistry::default(),
+            stats_publisher: None,
+            last_stats: Instant::now(),
+            steps: 0,
+            takeover: args.takeover,
+        };
+        ctx.stats_publisher = Some(ctx.publisher(topics::STACK_STATS)?);
+        Ok(ctx)
+    }
+
+    pub fn namespace(&self) -> &str {
+        &self.namespace
+    }
+    pub fn role(&self) -> &str {
+        &self.role
+    }
+    pub fn mode(&self) -> ClockMode {
+        self.mode
+    }
+    pub fn rate_hz(&self) -> f64 {
+        self.rate_hz
+    }
+    /// The `--seed` override, if any.
+    pub fn seed(&self) -> Option<u64> {
+        self.seed
+    }
+    /// Whether this process replaces (or restarts in place of) one that ran before it, and
+    /// should go on from that one's last output (`MOLE_TAKEOVER`, set by the launcher).
+    pub fn takes_over(&self) -> bool {
+        self.takeover
+    }
+    /// Whether SIGINT or SIGTERM arrived.
+    pub fn shutdown_requested(&self) -> bool {
+        self.shutdown.load(Ordering::SeqCst)
+    }
+    /// Asks the process to stop at its next wake-up.
+    pub fn request_shutdown(&self) {
+        self.shutdown.store(true, Ordering::SeqCst);
+    }
+    /// Counts a handled step (reported in the statistics). The first one is announced at once,
+    /// so a launcher swapping this process in knows when it has taken over.
+    pub fn count_step(&mut self) {
+        self.steps += 1;
+        if self.steps == 1 {
+            self.publish_stats();
+        }
+    }
+
+    pub(crate) fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+
+    fn service_name(&self, topic: &str) -> Result<ServiceName, RuntimeError> {
+        let full = topics::service_name(&self.namespace, topic);
+        full.as_str()
+            .try_into()
+            .map_err(|e| RuntimeError::Name(full.clone(), format!("{e:?}")))
+    }
+
+    fn open_services<M: Message>(
+        &self,
+        topic: &Topic<M>,
+    ) -> Result<(PubSubFactory<M>, EventFactory), RuntimeError> {
+        let name = self.service_name(topic.name)?;
+        let failed = |reason: String| RuntimeError::Service {
+            topic: topic.name.to_string(),
+            reason,
+        };
+        // Lockstep never drops: a full subscriber queue makes the publisher wait. Realtime
+        // drops the oldest sample, so a slow subscriber never stalls the pipeline.
+        let lockstep = self.mode == ClockMode::Lockstep;
+        let pubsub = self
+            .node
+            .service_builder(&name)
+            .publish_subscribe::<M>()
+            .history_size(topic.history)
+            .subscriber_max_buffer_size(topic.buffer)
+            .subscriber_max_borrowed_samples(2)
+            .max_publishers(topic.max_publishers)
+            .max_subscribers(topic.max_subscribers)
+            .enable_safe_overflow(!lockstep)
+            .open_or_create()
+            .map_err(|e| {
+                failed(describe_open_error(
+                    &format!("{e:?}"),
+                    &PayloadLayout::of::<M>(),
+                    recorded_payload(&name).as_ref(),
+                ))
+            })?;
+        // iceoryx2 opens a service whose payload has our type name and size but a stricter
+        // alignment; that is still another layout (another language's definition), so refuse
+        // anything but the exact one.
+        let ours = PayloadLayout::of::<M>();
+        let found = PayloadLayout::recorded(&pubsub.static_config().message_type_details().payload);
+        if (found.size, found.alignment) != (ours.size, ours.alignment) {
+            return Err(failed(layout_mismatch(&ours, &found)));
+        }
+        let event = self
+            .node
+            .service_builder(&name)
+            .event()
+            .max_notifiers(topic.max_publishers + 2)
+            .max_listeners(topic.max_subscribers + 2)
+            .open_or_create()
+            .map_err(|e| failed(format!("event service: {e:?}")))?;
+        Ok((pubsub, event))
+    }
+
+    /// A publisher on `topic`, with the event that wakes its subscribers.
+    pub fn publisher<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
+        let (pubsub, event) = self.open_services(&topic)?;
+        let port_failed =
+            |e: String| RuntimeError::Port(format!("publisher on {}: {e}", topic.name));
+        let lockstep = self.mode == ClockMode::Lockstep;
+        let mut builder = pubsub.publisher_builder().max_loaned_samples(2);
+        if lockstep {
+            // Lockstep waits for a full queue (that is what makes it deterministic), but not
+            // forever: a consumer that reads nothing for STUCK_CONSUMER (frozen, or gone while
+            // its queue was full) loses this sample instead of stopping the whole stack, and a
+            // shutdown never waits.
+            let shutdown = self.shutdown.clone();
+            let topic_name = topic.name;
+            builder = builder
+                .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+                .set_backpressure_handler(move |info: &iceoryx2::port::BackpressureInfo| {
+                    if shutdown.load(Ordering::Relaxed) {
+                        return iceoryx2::port::BackpressureAction::DiscardData;
+                    }
+                    if info.elapsed_time < STUCK_CONSUMER {
+                        return iceoryx2::port::BackpressureAction::Retry;
+                    }
+                    tracing::warn!(
+                        topic = topic_name,
+                        "a subscriber read nothing for {STUCK_CONSUMER:?}: this sample is dropped for it"
+                    );
+                    iceoryx2::port::BackpressureAction::DiscardData
+                });
+        }
+        let publisher = builder
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let notifier = event
+            .notifier_builder()
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let stats = self
+            .stats
+            .register(topic.name, true)
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        Ok(Publisher {
+            topic: topic.name,
+            publisher,
+            notifier,
+            stats,
+            seq: 0,
+        })
+    }
+
+    /// A subscriber on `topic`, with the listener its WaitSet sleeps on.
+    pub fn subscriber<M: Message>(&self, topic: Topic<M>) -> Result<Subscriber<M>, RuntimeError> {
+        self.subscriber_with(topic, true)
+    }
+
+    /// A subscriber on `topic` that never wakes the process: it is read when another input
+    /// wakes it. Publishers do not signal it, which saves them a system call per message; use
+    /// it for inputs that arrive before the process's trigger (sensing publishes odom last, so
+    /// localization reads the fix and the beacons passively).
+    pub fn passive_subscriber<M: Message>(
+        &self,
+        topic: Topic<M>,
+    ) -> Result<Subscriber<M>, RuntimeError> {
+        self.subscriber_with(topic, false)
+    }
+
+    fn subscriber_with<M: Message>(
+        &self,
+        topic: Topic<M>,
+        wakes: bool,
+    ) -> Result<Subscriber<M>, RuntimeError> {
+        let (pubsub, event) = self.open_services(&topic)?;
+        let port_failed =
+            |e: String| RuntimeError::Port(format!("subscriber on {}: {e}", topic.name));
+        let subscriber = pubsub
+            .subscriber_builder()
+            .buffer_size(topic.buffer)
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let listener = if wakes {
+            let listener = event
+                .listener_builder()
+                .create()
+                .map_err(|e| port_failed(format!("{e:?}")))?;
+            Some(Rc::new(listener))
+        } else {
+            None
+        };
+        let stats = self
+            .stats
+            .register(topic.name, false)
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        Ok(Subscriber {
+            topic: topic.name,
+            subscriber: Rc::new(subscriber),
+            listener,
+            stats,
+            latest: None,
+            pending: [None, None],
+            last_seq: None,
+            last_warning: None,
+        })
+    }
+
+    /// A replacement's hand-over (`mole swap` sets `MOLE_TAKEOVER`): waits up to `grace` for
+    /// the process being replaced to publish `topic` (the replacement's own output) and lends
+    /// the newest valid sample to `take`; returns its tick, or `None` when none came, and the
+    /// replacement starts afresh. The subscriber is gone on return, so the replacement's own
+    /// output never fills its queue (a lockstep publisher waits while a queue is full).
+    pub fn take_over<M: Message>(
+        &mut self,
+        topic: Topic<M>,
+        grace: Duration,
+        take: impl FnOnce(&M),
+    ) -> Result<Option<u64>, RuntimeError> {
+        let mut predecessor = self.subscriber(topic)?;
+        let waitset = self.waitset()?;
+        let waker = predecessor.waker();
+        let _attached = waitset.attach(&waker)?;
+        let deadline = Instant::now() + grace;
+        while !predecessor.update() {
+            if waitset.wait(self, Some(deadline))? != Wake::Data {
+                predecessor.update();
+                break;
+            }
+        }
+        Ok(predecessor.latest().map(|m| {
+            take(m);
+            m.header().tick
+        }))
+    }
+
+    /// A WaitSet for this process's wake-ups.
+    pub fn waitset(&self) -> Result<WaitSet, RuntimeError> {
+        Ok(WaitSet::new())
+    }
+
+    /// Announces that every port exists: publishes the first statistics at once, which is what
+    /// the launcher waits for before starting the processes that depend on this one.
+    pub fn ready(&mut self) {
+        tracing::info!(role = %self.role, namespace = %self.namespace, mode = %self.mode, "ready");
+        self.publish_stats();
+    }
+
+    /// Publishes the statistics when their period is due; returns the time until the next.
+    pub fn tick_stats(&mut self) -> Duration {
+        let elapsed = self.last_stats.elapsed();
+        if elapsed >= STATS_PERIOD {
+            self.publish_stats();
+            STATS_PERIOD
+        } else {
+            STATS_PERIOD - elapsed
+        }
+    }
+
+    fn publish_stats(&mut self) {
+        let window_s = self.last_stats.elapsed().as_secs_f64();
+        self.last_stats = Instant::now();
+        let (cpu_ns, max_rss_bytes) = resource_usage();
+        let steps = self.steps;
+        let (role, registry) = (&self.role, &self.stats);
+        if let Some(publisher) = self.stats_publisher.as_mut() {
+            let result = publisher.publish(steps, 0, |stats| {
+                mole_types::write_name(&mut stats.process, role);
+                stats.pid = std::process::id();
+                stats.cpu_ns = cpu_ns;
+                stats.max_rss_bytes = max_rss_bytes;
+                stats.steps = steps;
+                registry.write_and_reset_window(stats, window_s);
+            });
+            if let Err(e) = result {
+                tracing::debug!("cannot publish statistics: {e}");
+            }
+        }
+    }
+}
+
+/// User + system CPU time (ns) and peak RSS (bytes) of this process.
+fn resource_usage() -> (u64, u64) {
+    use nix::sys::resource::{UsageWho, getrusage};
+    match getrusage(UsageWho::RUSAGE_SELF) {
+        Ok(usage) => {
+            let tv_ns = |tv: nix::sys::time::TimeVal| {
+                (tv.tv_sec() as u64) * 1_000_000_000 + (tv.tv_usec() as u64) * 1000
+            };
+            let cpu = tv_ns(usage.user_time()) + tv_ns(usage.system_time());
+            (cpu, (usage.max_rss() as u64) * 1024)
+        }
+        Err(_) => (0, 0),
+    }
+}
+
+/// A payload's layout as iceoryx2 records it for a service: type name, size, alignment.
+struct PayloadLayout {
+    type_name: String,
+    size: usize,
+    alignment: usize,
+}
+
+impl PayloadLayout {
+    /// The layout of this process's message type.
+    fn of<M: Message>() -> PayloadLayout {
+        PayloadLayout {
+            type_name: M::wire_type_name().to_string(),
+            size: core::mem::size_of::<M>(),
+            alignment: core::mem::align_of::<M>(),
+        }
+    }
+
+    /// The layout a service records.
+    fn recorded(
+        detail: &iceoryx2::service::static_config::message_type_details::TypeDetail,
+    ) -> PayloadLayout {
+        PayloadLayout {
+            type_name: detail.type_name().to_string(),
+            size: detail.size(),
+            alignment: detail.alignment(),
+        }
+    }
+}
+
+impl std::fmt::Display for PayloadLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "`{}` ({} bytes, aligned to {})",
+            self.type_name, self.size, self.alignment
+        )
+    }
+}
+
+/// The payload layout of the publish-subscribe service `name`, if it exists.
+fn recorded_payload(name: &ServiceName) -> Option<PayloadLayout> {
+    use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as Recorded;
+    let details = ipc::Service::details(
+        name,
+        Config::global_config(),
+        MessagingPattern::PublishSubscribe,
+    )
+    .ok()??;
+    match details.static_details.messaging_pattern() {
+        Recorded::PublishSubscribe(config) => Some(PayloadLayout::recorded(
+            &config.message_type_details().payload,
+        )),
+        _ => None,
+    }
+}
+
+/// The sentence for a topic whose service carries another layout than this process's.
+fn layout_mismatch(ours: &PayloadLayout, found: &PayloadLayout) -> String {
+    format!(
+        "expected {ours}, found {found}: this process and the topic disagree on the message \
+         layout; build both sides from the same shared-types"
+    )
+}
+
+/// Turns iceoryx2's open errors into a sentence; a type mismatch names both layouts.
+fn describe_open_error(debug: &str, ours: &PayloadLayout, found: Option<&PayloadLayout>) -> String {
+    if debug.contains("IncompatibleTypes") {
+        match found {
+            Some(found) => layout_mismatch(ours, found),
+            None => format!(
+                "another process uses a different message type on this topic (this process \
+                 speaks {ours})"
+            ),
+        }
+    } else if debug.contains("VersionMismatch") || debug.contains("IncompatibleVersion") {
+        "the service was created by a process built against another iceoryx2 version".to_string()
+    } else {
+        debug.to_string()
+    }
+}

@@ -1,0 +1,180 @@
+//! Sleeping until an input arrives, a deadline passes or a shutdown is requested.
+
+use crate::clock::ClockMode;
+use crate::context::Context;
+use crate::error::RuntimeError;
+use crate::ports::Waker;
+use iceoryx2::prelude::*;
+use nix::poll::{PollFd, PollFlags, PollTimeout};
+use std::os::fd::{AsFd, AsRawFd, BorrowedFd, RawFd};
+use std::rc::Rc;
+use std::time::{Duration, Instant};
+
+/// Lockstep: the longest a process sleeps without looking at its inputs (see
+/// [`WaitSet::wait`]); costs ten idle wake-ups a second.
+pub const LOCKSTEP_RECHECK: Duration = Duration::from_millis(100);
+
+/// Why a process woke up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// At least one attached subscriber has new data.
+    Data,
+    /// The deadline passed with no data.
+    Timeout,
+    /// SIGINT or SIGTERM arrived: finish up and exit.
+    Shutdown,
+}
+
+/// Sleeps until data on an attached subscriber, a deadline, or a shutdown.
+///
+/// It sleeps in poll(2) on the sockets of the attached listeners rather than in iceoryx2's
+/// WaitSet, which allocates on every wake-up: a step of a process allocates nothing.
+pub struct WaitSet {
+    /// What poll(2) watches: the sockets of the attached listeners, kept between waits.
+    sockets: core::cell::RefCell<Vec<PollFd<'static>>>,
+    /// Every listener ever attached: drained on each wake-up, so a topic the process no longer
+    /// reads (world/map after the first sample) cannot keep the WaitSet awake. Holding them
+    /// keeps their sockets open for as long as the WaitSet lives.
+    listeners: core::cell::RefCell<Vec<Rc<iceoryx2::port::listener::Listener<ipc::Service>>>>,
+    /// The queues of the attached subscribers, looked at when a wait ends without a signal.
+    probes: core::cell::RefCell<Vec<Rc<dyn crate::ports::Probe>>>,
+    /// Whether a sample without its signal was reported already.
+    missed_signal: core::cell::Cell<bool>,
+}
+
+/// Keeps a subscriber attached to a [`WaitSet`] while it lives.
+pub struct Attachment<'w, 'a> {
+    waitset: &'w WaitSet,
+    socket: RawFd,
+    _waker: core::marker::PhantomData<&'a Waker>,
+}
+
+impl Drop for Attachment<'_, '_> {
+    fn drop(&mut self) {
+        self.waitset
+            .sockets
+            .borrow_mut()
+            .retain(|s| s.as_fd().as_raw_fd() != self.socket);
+    }
+}
+
+impl WaitSet {
+    pub(crate) fn new() -> WaitSet {
+        WaitSet {
+            sockets: core::cell::RefCell::new(Vec::new()),
+            listeners: core::cell::RefCell::new(Vec::new()),
+            probes: core::cell::RefCell::new(Vec::new()),
+            missed_signal: core::cell::Cell::new(false),
+        }
+    }
+
+    /// Wakes this WaitSet whenever the waker's topic is published.
+    pub fn attach<'w, 'a>(&'w self, waker: &'a Waker) -> Result<Attachment<'w, 'a>, RuntimeError> {
+        let Some(listener) = &waker.listener else {
+            return Err(RuntimeError::Wait(format!(
+                "{} was opened passive: it cannot wake a WaitSet",
+                waker.topic
+            )));
+        };
+        // SAFETY: the socket belongs to the listener, which `listeners` keeps alive (and the
+        // socket open) for as long as this WaitSet, and so its `sockets`, lives.
+        let socket = unsafe { listener.file_descriptor().native_handle() };
+        let mut sockets = self.sockets.borrow_mut();
+        if sockets.iter().any(|s| s.as_fd().as_raw_fd() == socket) {
+            return Err(RuntimeError::Wait(format!(
+                "{} is attached already",
+                waker.topic
+            )));
+        }
+        // SAFETY: see above; the entry leaves `sockets` when the attachment is dropped.
+        let fd = unsafe { BorrowedFd::borrow_raw(socket) };
+        sockets.push(PollFd::new(fd, PollFlags::POLLIN));
+        self.listeners.borrow_mut().push(listener.clone());
+        self.probes.borrow_mut().push(waker.probe.clone());
+        Ok(Attachment {
+            waitset: self,
+            socket,
+            _waker: core::marker::PhantomData,
+        })
+    }
+
+    /// Attaches every waker in `wakers`; they stay attached while the attachments live.
+    pub fn attach_all<'w>(
+        &'w self,
+        wakers: &'w [Waker],
+    ) -> Result<Vec<Attachment<'w, 'w>>, RuntimeError> {
+        wakers.iter().map(|w| self.attach(w)).collect()
+    }
+
+    /// Consumes the wake-up signals of every attached listener, on every return: besides
+    /// emptying the sockets, `try_wait` resets iceoryx2's "notified" state. In iceoryx2 0.10 a
+    /// notification that lands while the listener empties its socket leaves that state set
+    /// with no datagram behind; every later notification is then coalesced away and the
+    /// WaitSet sleeps through them. Only a `try_wait` clears it again, so a timeout drains too.
+    /// (Related upstream report: eclipse-iceoryx/iceoryx2#1811.)
+    fn drain_listeners(&self) {
+        // Before the caller reads the samples: a sample that arrives after this point leaves
+        // its signal pending for the next wait.
+        for listener in self.listeners.borrow().iter() {
+            let _ = listener.try_wait(|_| {});
+        }
+    }
+
+    /// Sleeps until data, `deadline` (if any) or a shutdown; publishes the statistics on the
+    /// way when they are due.
+    pub fn wait(&self, ctx: &mut Context, deadline: Option<Instant>) -> Result<Wake, RuntimeError> {
+        // Lockstep never sleeps longer than LOCKSTEP_RECHECK without looking at its inputs: a
+        // step whose wake-up went missing costs that long instead of stopping the stack.
+        let deadline = match (deadline, ctx.mode()) {
+            (None, ClockMode::Lockstep) => Some(Instant::now() + LOCKSTEP_RECHECK),
+            (deadline, _) => deadline,
+        };
+        loop {
+            if ctx.shutdown_requested() {
+                return Ok(Wake::Shutdown);
+            }
+            let until_stats = ctx.tick_stats();
+            let now = Instant::now();
+            let until_deadline = deadline.map(|d| d.saturating_duration_since(now));
+            if until_deadline == Some(Duration::ZERO) {
+                self.drain_listeners();
+                return Ok(Wake::Timeout);
+            }
+            // poll(2) waits in whole milliseconds: the last fraction of a deadline is slept
+            // precisely, so a 100 Hz world ticks on time.
+            if let Some(left) = until_deadline
+                && left < Duration::from_millis(1)
+            {
+                std::thread::sleep(left);
+                self.drain_listeners();
+                return Ok(Wake::Timeout);
+            }
+            let timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));
+            let timeout =
+                PollTimeout::try_from(timeout.as_millis().max(1)).unwrap_or(PollTimeout::MAX);
+            let woke = match nix::poll::poll(&mut self.sockets.borrow_mut(), timeout) {
+                Ok(ready) => ready > 0,
+                Err(nix::errno::Errno::EINTR) if ctx.shutdown_requested() => {
+                    return Ok(Wake::Shutdown);
+                }
+                Err(nix::errno::Errno::EINTR) => false,
+                Err(e) => return Err(RuntimeError::Wait(e.desc().to_string())),
+            };
+            if woke {
+                self.drain_listeners();
+                return Ok(Wake::Data);
+            }
+            // No signal: reset a stuck "notified" state (see `drain_listeners`), and if a
+            // sample came without its signal, wake up for it now.
+            self.drain_listeners();
+            if self.probes.borrow().iter().any(|p| p.has_data()) {
+                if !self.missed_signal.replace(true) {
+                    tracing::warn!(
+                        "a sample came without its wake-up signal; found by looking (warned once)"
+                    );
+                }
+                return Ok(Wake::Data);
+            }
+        }
+    }
+}
