@@ -76,6 +76,7 @@ fn benches(c: &mut Criterion) {
         scan: Some(&scan),
         tactile: None,
         grid: Some(&ringed),
+        last_command: mole_planning::Command::STOP,
     };
     dwa.follow(&input);
     // The whole command: field check, scan folding, 400 rollouts of 3 s.
@@ -125,6 +126,7 @@ fn benches(c: &mut Criterion) {
         scan: None,
         tactile: None,
         grid: Some(&g),
+        last_command: mole_planning::Command::STOP,
     };
     mole_planning::Planner::step(&mut apf, &input);
     c.bench_function("apf_force_at_point", |b| {

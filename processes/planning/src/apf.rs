@@ -16,10 +16,10 @@
 
 use crate::distance_field::DistanceField;
 use crate::random_walk::{RandomWalk, RandomWalkConfig};
-use crate::{Command, Planner, PlannerInput, RobotLimits, stop_command, usable};
+use crate::{Command, Planner, PlannerInput, RobotLimits, usable};
 use mole_types::{
-    MODE_DONE, MODE_ESCAPE, MODE_GOAL, MODE_STALLED, PlanStatus, STATUS_HAS_GOAL, Square,
-    wrap_angle,
+    MODE_ARRIVED, MODE_ESCAPE, MODE_GOAL, MODE_STALLED, PlanStatus, PlannerKind, STATUS_HAS_GOAL,
+    Square, wrap_angle,
 };
 
 /// Which APF formulas to use.
@@ -212,7 +212,6 @@ pub struct Apf {
     goal: [f64; 2],
     field: DistanceField,
     walk: RandomWalk,
-    prev: Command,
     phase: ApfPhase,
     best: f64,
     best_tick: u64,
@@ -235,7 +234,6 @@ impl Apf {
             goal,
             field: DistanceField::with_capacity(mole_types::MAX_GRID_CELLS),
             walk: RandomWalk::new(limits, RandomWalkConfig::default(), seed ^ 0xa9f),
-            prev: Command::STOP,
             phase: ApfPhase::Seeking,
             best: f64::INFINITY,
             best_tick: 0,
@@ -376,14 +374,13 @@ impl Apf {
 }
 
 impl Planner for Apf {
-    fn name(&self) -> &'static str {
-        "apf"
+    fn kind(&self) -> PlannerKind {
+        PlannerKind::Apf
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {
         if !usable(input) {
-            self.prev = stop_command(&self.limits, &self.prev, input.dt);
-            return self.prev;
+            return Command::STOP;
         }
         if let Some(grid) = input.grid {
             self.field.update(grid);
@@ -426,11 +423,11 @@ impl Planner for Apf {
                 self.phase = ApfPhase::Stalled { since: tick };
             }
         }
-        let wish = match self.phase {
+        match self.phase {
             ApfPhase::Reached => Command {
                 v: 0.0,
                 omega: 0.0,
-                mode: MODE_DONE,
+                mode: MODE_ARRIVED,
             },
             ApfPhase::Stalled { since } => {
                 if tick.saturating_sub(since) >= self.steps(0.2, dt) {
@@ -483,14 +480,7 @@ impl Planner for Apf {
                     mode: MODE_GOAL,
                 }
             }
-        };
-        let (v, omega) = self.limits.limit(&self.prev, wish.v, wish.omega, dt);
-        self.prev = Command {
-            v,
-            omega,
-            mode: wish.mode,
-        };
-        self.prev
+        }
     }
 
     fn replan(&mut self) {
@@ -507,7 +497,6 @@ impl Planner for Apf {
     }
 
     fn write_status(&self, status: &mut PlanStatus) {
-        status.mode = self.prev.mode;
         status.flags = STATUS_HAS_GOAL;
         (status.goal_x, status.goal_y) = (self.goal[0], self.goal[1]);
         (status.frontier_x, status.frontier_y) = (0.0, 0.0);

@@ -10,7 +10,7 @@
 //! wish, limited once by [`crate::Limited`] around it.
 
 use crate::obstacles::{contact_force, free_travel, freest_direction, nearest_obstacle};
-use crate::{Command, Planner, PlannerInput, RobotLimits, usable};
+use crate::{Command, DwaConfig, Planner, PlannerInput, RobotLimits, usable};
 use core::f64::consts::{FRAC_PI_2, FRAC_PI_3, PI};
 use mole_types::{MODE_BOUNCE_BACK, PlannerKind, wrap_angle};
 
@@ -43,6 +43,11 @@ pub fn bounce_back_position(
         PositionUpdate::Corrected => [x[0] + vx * dt, x[1] + vy * dt],
     }
 }
+
+/// What the range trigger under the DWA allows for lidar noise (m): d_obs is the shortest raw
+/// range in its sector, which reads up to about 3 σ short of the true gap at the default
+/// σ = 0.01 m (`sensors.lidar.range_std`).
+pub const TRIGGER_NOISE: f64 = 0.03;
 
 /// Settings of the bounce-back layer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -99,6 +104,20 @@ impl Default for BounceBackConfig {
 }
 
 impl BounceBackConfig {
+    /// The reactive layer under the DWA `dwa`, its last resort only (algorithms §4): the range
+    /// trigger d_th sits [`TRIGGER_NOISE`] below the closest gap the DWA drives to
+    /// ([`DwaConfig::closest_approach`]), so the DWA alone never drives where it fires (a DWA
+    /// margin under the noise leaves the touch alone); it re-arms 0.09 m further out (0.12 m at
+    /// the default margin). The rest is the default.
+    pub fn under_dwa(dwa: &DwaConfig) -> Self {
+        let d_th = (dwa.closest_approach() - TRIGGER_NOISE).max(0.0);
+        Self {
+            d_th,
+            d_release: d_th + 0.09,
+            ..Self::default()
+        }
+    }
+
     /// The config with every non-finite or out-of-range field replaced by its default
     /// (α clamped into (0, 1], d_release kept above d_th).
     pub fn sanitized(self) -> Self {

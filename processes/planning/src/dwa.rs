@@ -18,15 +18,18 @@
 
 use crate::distance_field::DistanceField;
 use crate::global_path::{GlobalPath, path_distance};
-use crate::{Command, Planner, PlannerInput, RobotLimits, stop_command, usable};
+use crate::{Command, Planner, PlannerInput, RobotLimits, usable};
 use mole_types::{
-    Grid, MODE_DONE, MODE_ESCAPE, MODE_GOAL, PlanStatus, STATUS_HAS_GOAL, wrap_angle,
+    Grid, MODE_ARRIVED, MODE_ESCAPE, MODE_GOAL, PlanStatus, PlannerKind, STATUS_HAS_GOAL,
+    wrap_angle,
 };
 
 /// Rollouts step by `sim_dt` up to this time (s), by 2 × `sim_dt` beyond.
 const FINE_HORIZON: f64 = 1.0;
 
-/// How much (m) a rollout that starts inside the hard limit may still approach an obstacle.
+/// How far (m) below the hard limit a rollout from outside it may still reach (so that the
+/// robot can pass where the measured clearance sits on the limit); a rollout from inside it may
+/// not approach at all, so the robot never creeps in step by step.
 const SLACK: f64 = 0.01;
 
 /// Standing still this long (s) near an obstacle while the aim is not reached starts a recovery.
@@ -134,6 +137,15 @@ pub struct DwaConfig {
     pub stray_distance: f64,
     /// Inflation (m) of the global path over the robot radius + `safety_margin`.
     pub inflation_margin: f64,
+}
+
+impl DwaConfig {
+    /// The smallest gap (m) between the rim and an obstacle, as the DWA measures it, that its
+    /// rollouts may reach: `safety_margin` less the slack below the hard limit. The reactive
+    /// layer under the DWA fires only below this ([`crate::BounceBackConfig::under_dwa`]).
+    pub fn closest_approach(&self) -> f64 {
+        self.safety_margin - SLACK
+    }
 }
 
 impl Default for DwaConfig {
@@ -340,7 +352,6 @@ pub struct Dwa {
     /// Path to follow (world points), for the path critic.
     path: Vec<[f64; 2]>,
     n_steps: usize,
-    prev: Command,
     last_cost: f64,
     use_grid: bool,
 }
@@ -385,7 +396,6 @@ impl Dwa {
             scan_points: PointIndex::new(mole_types::MAX_BEAMS + 64, 0.25),
             path: Vec::with_capacity(mole_types::MAX_PATH),
             n_steps: n,
-            prev: Command::STOP,
             last_cost: 0.0,
             use_grid: true,
         }
@@ -667,8 +677,7 @@ impl Dwa {
             let (mut x, mut y, mut th) = (s.x, s.y, s.theta);
             let c0 = self.clearance(x, y, cap);
             let mut min_c = c0;
-            // Hard limit: radius + margin (a rollout starting inside it may approach by
-            // `SLACK`, else a robot sitting on the limit is trapped there).
+            // Hard limit: radius + margin, less `SLACK` (see `DwaConfig::closest_approach`).
             let hard = r + cfg.safety_margin;
             let walls = self.walls();
             let braking = v * v / (2.0 * self.limits.max_accel.min(1e6));
@@ -723,10 +732,11 @@ impl Dwa {
                     x += v * cs * dt;
                     y += v * sn * dt;
                     c = self.rollout_clearance(x, y, cap, &walls);
-                    // Collides: closer than the hard limit, unless already that close and
-                    // not getting more than `SLACK` closer (so a robot on the limit can turn
-                    // away).
-                    if (c < r + 0.01 && c < c0 - 1e-9) || (c < hard && c < c0.min(hard) - SLACK) {
+                    // Collides: closer than the hard limit less `SLACK`, or, from a start
+                    // already that close, any closer than the start (the robot may turn away or
+                    // run parallel, never creep in: the limit is not re-measured from where the
+                    // last step left it).
+                    if (c < r + 0.01 && c < c0 - 1e-9) || c < c0.min(hard - SLACK) {
                         // Fox et al.'s admissible velocities: fine if the robot can still
                         // brake before that point; the arc then ends there.
                         if braking + 1e-9 > travelled {
@@ -816,8 +826,8 @@ impl Dwa {
             x: input.pose.x,
             y: input.pose.y,
             theta: input.pose.theta,
-            v: self.prev.v,
-            omega: self.prev.omega,
+            v: input.last_command.v,
+            omega: input.last_command.omega,
         };
         let choice = self.choose(&state);
         self.last_cost = choice.cost;
@@ -863,31 +873,26 @@ impl Dwa {
             );
             (0.0, 2.0 * e)
         };
-        let (v, omega) = self.limits.limit(&self.prev, v, w, input.dt);
-        self.prev = Command { v, omega, mode };
-        self.prev
+        Command { v, omega: w, mode }
     }
 }
 
 impl Planner for Dwa {
-    fn name(&self) -> &'static str {
-        "dwa"
+    fn kind(&self) -> PlannerKind {
+        PlannerKind::Dwa
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {
         if !usable(input) {
-            self.prev = stop_command(&self.limits, &self.prev, input.dt);
-            return self.prev;
+            return Command::STOP;
         }
         let d = (input.pose.x - self.goal[0]).hypot(input.pose.y - self.goal[1]);
         if d <= self.config.goal_tolerance {
-            let (v, omega) = self.limits.limit(&self.prev, 0.0, 0.0, input.dt);
-            self.prev = Command {
-                v,
-                omega,
-                mode: MODE_DONE,
+            return Command {
+                v: 0.0,
+                omega: 0.0,
+                mode: MODE_ARRIVED,
             };
-            return self.prev;
         }
         if self.config.global_path
             && self.config.cost == DwaCost::Critics
@@ -920,7 +925,6 @@ impl Planner for Dwa {
     }
 
     fn write_status(&self, status: &mut PlanStatus) {
-        status.mode = self.prev.mode;
         status.flags = STATUS_HAS_GOAL;
         (status.goal_x, status.goal_y) = (self.goal[0], self.goal[1]);
         (status.frontier_x, status.frontier_y) = (0.0, 0.0);
@@ -1139,6 +1143,33 @@ mod tests {
         assert_eq!(d.score(&DwaState::default(), 0.5, 0.3), f64::INFINITY);
     }
 
+    /// The dynamic window is centred on the command sent last: turning left at full rate, the
+    /// DWA cannot wish a right turn toward a goal on its right within `window_dt`; standing, it
+    /// can.
+    #[test]
+    fn the_window_starts_from_the_command_sent() {
+        let mut d = Dwa::new(limits(), DwaConfig::default(), [0.0, -5.0]);
+        let input = |last_command| PlannerInput {
+            tick: 0,
+            dt: 0.05,
+            pose: mole_types::Pose2::new(0.0, 0.0, 0.0),
+            scan: None,
+            tactile: None,
+            grid: None,
+            last_command,
+        };
+        let standing = d.step(&input(Command::STOP));
+        assert!(standing.omega < 0.0, "{standing:?}");
+        let turning_left = Command {
+            v: 0.2,
+            omega: 2.0,
+            mode: MODE_GOAL,
+        };
+        let c = d.step(&input(turning_left));
+        // ω ∈ [2 − 8·0.25, 2] = [0, 2].
+        assert!(c.omega >= 0.0, "{c:?}");
+    }
+
     #[test]
     fn goal_seeking_dwa_follows_a_path_around_a_wall() {
         // 4 m × 4 m at 0.05 m, a wall at x = 2 m from y = 0 to 3 m; goal behind it.
@@ -1146,10 +1177,14 @@ mod tests {
         for r in 0..60 {
             g.cells[r * 80 + 40] = mole_types::CELL_OCCUPIED;
         }
-        let mut d = Dwa::new(limits(), DwaConfig::default(), [3.0, 1.0]);
+        let mut d = crate::Limited::new(
+            Dwa::new(limits(), DwaConfig::default(), [3.0, 1.0]),
+            limits(),
+        );
         let mut pose = mole_types::Pose2::new(1.0, 1.0, 0.0);
         let mut reached = false;
         let mut min_clear = f64::INFINITY;
+        let mut last_command = Command::STOP;
         for tick in 0..1500 {
             let input = PlannerInput {
                 tick,
@@ -1158,18 +1193,21 @@ mod tests {
                 scan: None,
                 tactile: None,
                 grid: Some(&g),
+                last_command,
             };
             let c = d.step(&input);
+            last_command = c;
             if tick == 0 {
-                assert_eq!(d.global_path().kind(), crate::global_path::PathKind::Known);
+                let path = d.inner().global_path();
+                assert_eq!(path.kind(), crate::global_path::PathKind::Known);
                 // The path goes over the wall's end (y > 3 m).
-                assert!(d.global_path().points().iter().any(|p| p[1] > 3.0));
+                assert!(path.points().iter().any(|p| p[1] > 3.0));
             }
             pose.theta += c.omega * 0.05;
             pose.x += c.v * pose.theta.cos() * 0.05;
             pose.y += c.v * pose.theta.sin() * 0.05;
-            min_clear = min_clear.min(d.field.distance(pose.x, pose.y));
-            if c.mode == MODE_DONE {
+            min_clear = min_clear.min(d.inner().field.distance(pose.x, pose.y));
+            if c.mode == MODE_ARRIVED {
                 reached = true;
                 break;
             }
@@ -1180,6 +1218,60 @@ mod tests {
         let mut st: Box<PlanStatus> = bytemuck::zeroed_box();
         d.write_status(&mut st);
         assert!(st.n_path >= 2 && st.flags & STATUS_HAS_GOAL != 0);
+        assert_eq!(st.mode, MODE_ARRIVED);
+    }
+
+    /// A robot already inside its margin beside a wall, its aim inside the margin too, never
+    /// creeps closer than where it starts: the limit is not re-measured step by step.
+    #[test]
+    fn a_robot_inside_the_margin_does_not_creep_closer() {
+        // 4 m × 4 m at 0.05 m, a wall whose face is at x = 2 m, the full height.
+        let mut g = crate::obstacles::test_support::grid_free(80, 80, 0.05);
+        for r in 0..80 {
+            g.cells[r * 80 + 40] = mole_types::CELL_OCCUPIED;
+        }
+        let config = DwaConfig {
+            global_path: false,
+            ..DwaConfig::default()
+        };
+        // The aim hugs the face: the straight way there runs into the margin.
+        let mut d = crate::Limited::new(Dwa::new(limits(), config, [1.9, 3.5]), limits());
+        // Rim 0.04 m from the face (inside 0.07 − 0.01), heading a little toward it.
+        let mut pose = mole_types::Pose2::new(1.76, 1.0, 1.4);
+        let gap = |d: &crate::Limited<Dwa>, p: &mole_types::Pose2| {
+            d.inner().field.distance(p.x, p.y) - limits().radius
+        };
+        let mut last_command = Command::STOP;
+        let (mut start, mut closest, mut travelled) = (f64::NAN, f64::INFINITY, 0.0);
+        for tick in 0..400 {
+            let input = PlannerInput {
+                tick,
+                dt: 0.05,
+                pose,
+                scan: None,
+                tactile: None,
+                grid: Some(&g),
+                last_command,
+            };
+            let c = d.step(&input);
+            last_command = c;
+            if tick == 0 {
+                start = gap(&d, &pose);
+            }
+            pose.theta += c.omega * 0.05;
+            pose.x += c.v * pose.theta.cos() * 0.05;
+            pose.y += c.v * pose.theta.sin() * 0.05;
+            travelled += c.v.abs() * 0.05;
+            closest = closest.min(gap(&d, &pose));
+        }
+        assert!((start - 0.04).abs() < 1e-9, "{start}");
+        // It does move (along the wall, toward the aim)...
+        assert!(travelled > 1.0, "{travelled}");
+        // ...but never into the margin deeper than it started (within the arc's sag).
+        assert!(
+            closest > start - 0.005,
+            "closest gap {closest}, start {start}"
+        );
     }
 
     #[test]

@@ -10,18 +10,21 @@
 //! C(f) = −α·I/I_max + β·L/L_max with I_max, L_max over the current candidates (§5.3). The chosen
 //! frontier's path comes from the Dijkstra predecessors, shortened by line of sight to at most
 //! `MAX_PATH` waypoints, and a local planner (DWA or APF) follows a carrot on it. Re-selection:
-//! when the frontier is reached, vanishes, or every `reselect_every` steps. Done when no reachable
-//! frontier is left (`MODE_DONE`, `STATUS_EXPLORATION_COMPLETE`, zero command).
+//! when the frontier is reached, vanishes, or every `reselect_every` steps. A frontier reached
+//! that is still there is exhausted (its cells count as no frontier from then on). Done when no
+//! frontier is worth going to: none of `min_cluster` cells or more that is reachable and not
+//! exhausted (algorithms §5, "complete"; `MODE_DONE`, `STATUS_EXPLORATION_COMPLETE`, zero wish).
 
 use crate::apf::{Apf, ApfConfig};
 use crate::distance_field::DistanceField;
 use crate::dwa::{Dwa, DwaConfig};
 use crate::global_path::GlobalPath;
 use crate::grid_search::GridSearch;
-use crate::{Command, LocalPlanner, Planner, PlannerInput, RobotLimits, stop_command, usable};
+use crate::{Command, LocalPlanner, Planner, PlannerInput, RobotLimits, usable};
 use mole_types::{
     CELL_FREE, CELL_UNEXPLORED, Grid, MAX_GRID_CELLS, MAX_PATH, MODE_DONE, MODE_EXPLORE,
-    PlanStatus, STATUS_EXPLORATION_COMPLETE, STATUS_HAS_FRONTIER, STATUS_HAS_GOAL, wrap_angle,
+    PlanStatus, PlannerKind, STATUS_EXPLORATION_COMPLETE, STATUS_HAS_FRONTIER, STATUS_HAS_GOAL,
+    wrap_angle,
 };
 
 /// Settings of the frontier planner.
@@ -121,6 +124,9 @@ pub struct FrontierSelector {
     candidates: Vec<Frontier>,
     path_cells: Vec<u32>,
     path: Vec<[f64; 2]>,
+    /// Frontier cells the robot went to and could not explore (see [`Self::exhaust`]); they
+    /// are no frontier any more. Cleared when the grid's shape changes.
+    exhausted: Vec<bool>,
 }
 
 impl FrontierSelector {
@@ -147,6 +153,22 @@ impl FrontierSelector {
             candidates: Vec::with_capacity(n / 4),
             path_cells: Vec::with_capacity(n),
             path: Vec::with_capacity(MAX_PATH),
+            exhausted: Vec::with_capacity(n),
+        }
+    }
+
+    /// The cluster of frontier cell `cell` in the last selection was reached and is still
+    /// there: the sensors cannot explore it from where the robot can go, so it is no frontier
+    /// from now on (algorithms §5, "complete").
+    pub fn exhaust(&mut self, cell: usize) {
+        let Some(&cluster) = self.label.get(cell) else {
+            return;
+        };
+        if self.exhausted.len() != self.label.len() {
+            return;
+        }
+        for (e, &l) in self.exhausted.iter_mut().zip(&self.label) {
+            *e |= l == cluster;
         }
     }
 
@@ -182,6 +204,10 @@ impl FrontierSelector {
         let (w, h) = (grid.width as usize, grid.height as usize);
         if w == 0 || h == 0 || cells.len() != w * h {
             return None;
+        }
+        if (self.w, self.h) != (w, h) || self.exhausted.len() != w * h {
+            self.exhausted.clear();
+            self.exhausted.resize(w * h, false);
         }
         (self.w, self.h, self.res, self.origin) = (w, h, res, [grid.origin_x, grid.origin_y]);
         let col = ((robot[0] - grid.origin_x) / res).floor();
@@ -222,7 +248,7 @@ impl FrontierSelector {
         const NOT_FRONTIER: u32 = u32::MAX - 1;
         self.label.clear();
         self.label.extend((0..w * h).map(|i| {
-            if is_frontier_cell(cells, w, h, i) {
+            if is_frontier_cell(cells, w, h, i) && !self.exhausted[i] {
                 UNSEEN
             } else {
                 NOT_FRONTIER
@@ -361,7 +387,6 @@ impl FrontierSelector {
 /// The frontier planner (algorithms §5) with a local planner following the path.
 #[derive(Debug, Clone)]
 pub struct FrontierExplorer {
-    limits: RobotLimits,
     config: FrontierConfig,
     local: LocalPlanner,
     selector: FrontierSelector,
@@ -373,7 +398,6 @@ pub struct FrontierExplorer {
     last_select: Option<u64>,
     misses: u32,
     done: bool,
-    prev: Command,
     carrot: Option<[f64; 2]>,
     selections: u64,
 }
@@ -390,7 +414,6 @@ impl FrontierExplorer {
     ) -> Self {
         let limits = limits.sanitized();
         Self {
-            limits,
             config,
             local,
             selector: FrontierSelector::new(config, limits.radius),
@@ -401,7 +424,6 @@ impl FrontierExplorer {
             last_select: None,
             misses: 0,
             done: false,
-            prev: Command::STOP,
             carrot: None,
             selections: 0,
         }
@@ -444,27 +466,32 @@ impl FrontierExplorer {
 }
 
 impl Planner for FrontierExplorer {
-    fn name(&self) -> &'static str {
-        "frontier"
+    fn kind(&self) -> PlannerKind {
+        PlannerKind::Frontier
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {
         if !usable(input) {
-            self.prev = stop_command(&self.limits, &self.prev, input.dt);
-            return self.prev;
+            return Command::STOP;
         }
         let p = [input.pose.x, input.pose.y];
         let Some(grid) = input.grid else {
             // No map yet: look around in place.
-            let (v, omega) = self.limits.limit(&self.prev, 0.0, 0.5, input.dt);
-            self.prev = Command {
-                v,
-                omega,
+            return Command {
+                v: 0.0,
+                omega: 0.5,
                 mode: MODE_EXPLORE,
             };
-            return self.prev;
         };
         if self.needs_selection(grid, input.tick, p) {
+            // Reached, yet still a frontier: nothing to gain there (algorithms §5, "complete").
+            let (w, h) = (grid.width as usize, grid.height as usize);
+            if let Some(f) = self.chosen
+                && (p[0] - f.x).hypot(p[1] - f.y) < self.config.reached_distance
+                && is_frontier_cell(grid.cells(), w, h, f.cell)
+            {
+                self.selector.exhaust(f.cell);
+            }
             self.last_select = Some(input.tick);
             self.selections += 1;
             self.chosen = self.selector.select(grid, p);
@@ -484,7 +511,7 @@ impl Planner for FrontierExplorer {
                 );
             }
         }
-        let wish = if self.done {
+        if self.done {
             self.carrot = None;
             Command {
                 v: 0.0,
@@ -517,15 +544,7 @@ impl Planner for FrontierExplorer {
                 omega: e,
                 mode: MODE_EXPLORE,
             }
-        };
-        let (v, omega) = self.limits.limit(&self.prev, wish.v, wish.omega, input.dt);
-        self.prev = Command {
-            v,
-            omega,
-            mode: wish.mode,
-        };
-        // Keep the local planners' velocity memory in step with what was sent.
-        self.prev
+        }
     }
 
     fn replan(&mut self) {
@@ -538,7 +557,6 @@ impl Planner for FrontierExplorer {
     }
 
     fn write_status(&self, status: &mut PlanStatus) {
-        status.mode = self.prev.mode;
         status.flags = 0;
         (status.goal_x, status.goal_y) = (0.0, 0.0);
         (status.frontier_x, status.frontier_y) = (0.0, 0.0);
@@ -655,6 +673,75 @@ mod tests {
         assert!(f.is_some());
     }
 
+    /// A 4 m × 4 m room at 0.1 m: the left half explored and free, the right half unexplored.
+    fn half_explored_room() -> Box<Grid> {
+        let mut g = grid_free(40, 40, 0.1);
+        for r in 0..40 {
+            g.cells[r * 40 + 20..r * 40 + 40].fill(CELL_UNEXPLORED);
+        }
+        g
+    }
+
+    /// Steps `e` `steps` times at `pose` on `g` (the robot held there), each after the command
+    /// before; returns the modes.
+    fn hold(e: &mut FrontierExplorer, g: &Grid, pose: mole_types::Pose2, steps: u64) -> Vec<u32> {
+        let mut c = Command::STOP;
+        (0..steps)
+            .map(|tick| {
+                c = e.step(&PlannerInput {
+                    tick,
+                    dt: 0.01,
+                    pose,
+                    scan: None,
+                    tactile: None,
+                    grid: Some(g),
+                    last_command: c,
+                });
+                c.mode
+            })
+            .collect()
+    }
+
+    fn explorer() -> FrontierExplorer {
+        FrontierExplorer::new(
+            limits(),
+            FrontierConfig::default(),
+            LocalPlanner::Dwa,
+            DwaConfig::default(),
+            ApfConfig::default(),
+            1,
+        )
+    }
+
+    /// Half a room unexplored, its frontier 1.5 m away and reachable: never done, however long
+    /// (ten re-selections) the robot takes to get there.
+    #[test]
+    fn a_reachable_frontier_with_gain_is_never_done() {
+        let g = half_explored_room();
+        let mut e = explorer();
+        let modes = hold(&mut e, &g, mole_types::Pose2::new(0.5, 2.0, 0.0), 2000);
+        assert!(
+            !modes.contains(&MODE_DONE),
+            "done with half the room unexplored"
+        );
+        assert!(e.chosen().is_some_and(|f| f.x > 1.9 && f.x < 2.1));
+        assert!(e.selections() >= 10 && !e.done());
+    }
+
+    /// Standing at the frontier while it stays (the sensors cannot explore it): it is
+    /// exhausted, and with nothing else left, exploration is complete.
+    #[test]
+    fn a_frontier_reached_that_stays_is_exhausted_and_then_done() {
+        let g = half_explored_room();
+        let mut e = explorer();
+        let at = mole_types::Pose2::new(1.95, 2.0, 0.0);
+        let modes = hold(&mut e, &g, at, 400);
+        assert_eq!(modes.last(), Some(&MODE_DONE));
+        assert!(e.done() && e.chosen().is_none());
+        // Elsewhere in the room the exhausted cells stay no frontier.
+        assert!(e.selector.select(&g, [0.5, 2.0]).is_none());
+    }
+
     #[test]
     fn explored_map_means_done_with_a_zero_command_and_the_flag() {
         let g = grid_free(40, 40, 0.1);
@@ -675,6 +762,7 @@ mod tests {
                 scan: None,
                 tactile: None,
                 grid: Some(&g),
+                last_command: c,
             };
             c = e.step(&input);
         }

@@ -4,18 +4,17 @@
 //! [`GoalSeeker`] drives toward the goal with its primary local planner; when the bounce-back
 //! layer asks for a re-plan ([`Planner::replan`]), the configured re-planner takes over for
 //! `replan_time` seconds, then hands back to the primary (which re-plans too). Both planners are
-//! built up front, so switching allocates nothing; every command is limited relative to the
-//! previous one sent, whichever planner made it.
+//! built up front, so switching allocates nothing; both read the robot's velocity from the
+//! command sent last, whichever planner made it.
 
 use crate::apf::{Apf, ApfConfig};
 use crate::dwa::{Dwa, DwaConfig};
 use crate::{Command, LocalPlanner, Planner, PlannerInput, RobotLimits};
-use mole_types::PlanStatus;
+use mole_types::{PlanStatus, PlannerKind};
 
 /// A goal-seeking planner whose re-planning after a bounce is APF or DWA. See the module docs.
 #[derive(Debug, Clone)]
 pub struct GoalSeeker {
-    limits: RobotLimits,
     primary: LocalPlanner,
     replanner: LocalPlanner,
     replan_time: f64,
@@ -27,7 +26,6 @@ pub struct GoalSeeker {
     pending: bool,
     /// Whether the re-planner has seen a step (its buffers sized to the grid).
     warmed: bool,
-    prev: Command,
 }
 
 impl GoalSeeker {
@@ -46,7 +44,6 @@ impl GoalSeeker {
     ) -> Self {
         let limits = limits.sanitized();
         Self {
-            limits,
             primary,
             replanner,
             replan_time: if replan_time.is_finite() && replan_time > 0.0 {
@@ -60,7 +57,6 @@ impl GoalSeeker {
             remaining: 0.0,
             pending: false,
             warmed: false,
-            prev: Command::STOP,
         }
     }
 
@@ -78,10 +74,10 @@ impl GoalSeeker {
 }
 
 impl Planner for GoalSeeker {
-    fn name(&self) -> &'static str {
+    fn kind(&self) -> PlannerKind {
         match self.primary {
-            LocalPlanner::Dwa => "dwa",
-            LocalPlanner::Apf => "apf",
+            LocalPlanner::Dwa => PlannerKind::Dwa,
+            LocalPlanner::Apf => PlannerKind::Apf,
         }
     }
 
@@ -112,10 +108,7 @@ impl Planner for GoalSeeker {
             }
         }
         let a = self.active;
-        let c = self.planner(a).step(input);
-        let (v, omega) = self.limits.limit(&self.prev, c.v, c.omega, input.dt);
-        self.prev = Command { v, omega, ..c };
-        self.prev
+        self.planner(a).step(input)
     }
 
     fn replan(&mut self) {
@@ -141,13 +134,13 @@ impl Planner for GoalSeeker {
             LocalPlanner::Dwa => self.dwa.write_status(status),
             LocalPlanner::Apf => self.apf.write_status(status),
         }
-        status.mode = self.prev.mode;
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Limited;
     use crate::obstacles::test_support::grid_free;
 
     #[test]
@@ -160,7 +153,7 @@ mod tests {
             max_alpha: 8.0,
         };
         let g = grid_free(60, 60, 0.05);
-        let mut s = GoalSeeker::new(
+        let seeker = GoalSeeker::new(
             limits,
             [2.5, 2.5],
             LocalPlanner::Dwa,
@@ -170,13 +163,17 @@ mod tests {
             ApfConfig::default(),
             3,
         );
-        let input = |tick| PlannerInput {
+        // Whichever planner drives, the command sent stays within the acceleration limit of
+        // the one sent before.
+        let mut s = Limited::new(seeker, limits);
+        let input = |tick, last_command| PlannerInput {
             tick,
             dt: 0.05,
             pose: mole_types::Pose2::new(0.5, 0.5, 0.0),
             scan: None,
             tactile: None,
             grid: Some(&g),
+            last_command,
         };
         let mut prev = Command::STOP;
         let mut active = Vec::new();
@@ -184,15 +181,15 @@ mod tests {
             if tick == 10 {
                 s.replan();
             }
-            let c = s.step(&input(tick));
+            let c = s.step(&input(tick, prev));
             assert!(
                 (c.v - prev.v).abs() <= 2.0 * 0.05 + 1e-9,
                 "{c:?} after {prev:?}"
             );
             prev = c;
-            active.push(s.active());
+            active.push(s.inner().active());
         }
-        assert_eq!(s.name(), "dwa");
+        assert_eq!(s.kind(), PlannerKind::Dwa);
         assert!(active[..10].iter().all(|a| *a == LocalPlanner::Dwa));
         // APF for 1 s = 20 steps (+1 for the hand-back step), then DWA again.
         let apf = active.iter().filter(|a| **a == LocalPlanner::Apf).count();

@@ -270,6 +270,11 @@ impl<P: Planner> Limited<P> {
     pub fn inner(&self) -> &P {
         &self.inner
     }
+
+    /// The wrapped planner, to adjust.
+    pub fn inner_mut(&mut self) -> &mut P {
+        &mut self.inner
+    }
 }
 
 impl<P: Planner> Planner for Limited<P> {
@@ -344,7 +349,8 @@ pub struct PlannerConfig {
     pub local: LocalPlanner,
     /// Seed of every random stream.
     pub seed: u64,
-    /// The bounce-back layer's settings.
+    /// The bounce-back layer's settings; for `dwa` and `frontier`,
+    /// [`BounceBackConfig::under_dwa`] of `dwa` (set both together).
     pub bounce_back: BounceBackConfig,
     /// APF settings (`apf`, and `frontier` with `local = Apf`).
     pub apf: ApfConfig,
@@ -370,13 +376,10 @@ impl PlannerConfig {
             goal_tolerance: None,
             local: LocalPlanner::default(),
             seed: 0,
-            // DWA keeps its own margin (0.1 m); the reactive layer is then the last resort only.
+            // Under the DWA the reactive layer is the last resort only: it fires only closer
+            // than the DWA ever drives.
             bounce_back: if matches!(kind, PlannerKind::Dwa | PlannerKind::Frontier) {
-                BounceBackConfig {
-                    d_th: 0.05,
-                    d_release: 0.12,
-                    ..BounceBackConfig::default()
-                }
+                BounceBackConfig::under_dwa(&DwaConfig::default())
             } else {
                 BounceBackConfig::default()
             },
@@ -521,6 +524,72 @@ mod tests {
             let p = build_planner(&config, limits()).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(p.kind(), kind);
         }
+    }
+
+    /// Under the DWA the reactive layer fires only where the DWA never drives: its range trigger
+    /// lies the lidar-noise allowance below the DWA's closest approach, for `dwa` and `frontier`.
+    #[test]
+    fn the_trigger_under_the_dwa_is_derived_from_its_margin() {
+        for kind in [PlannerKind::Dwa, PlannerKind::Frontier] {
+            let config = PlannerConfig::new(kind);
+            let d_th = config.bounce_back.d_th;
+            let closest = config.dwa.closest_approach();
+            assert!(d_th > 0.0, "{kind:?}: d_th {d_th}");
+            assert!(
+                d_th + bounce_back::TRIGGER_NOISE <= closest + 1e-12,
+                "{kind:?}: d_th {d_th}, closest approach {closest}"
+            );
+        }
+        let wide = DwaConfig {
+            safety_margin: 0.2,
+            ..DwaConfig::default()
+        };
+        let bb = BounceBackConfig::under_dwa(&wide);
+        assert!((bb.d_th - (wide.closest_approach() - bounce_back::TRIGGER_NOISE)).abs() < 1e-12);
+        assert!(bb.d_release > bb.d_th);
+    }
+
+    /// Always wishes full speed ahead.
+    struct FullAhead;
+
+    impl Planner for FullAhead {
+        fn kind(&self) -> PlannerKind {
+            PlannerKind::RandomWalk
+        }
+        fn step(&mut self, _input: &PlannerInput) -> Command {
+            Command {
+                v: 9.0,
+                omega: 0.0,
+                mode: mole_types::MODE_EXPLORE,
+            }
+        }
+    }
+
+    /// The one limit is relative to the command sent last, not to what the stack returned
+    /// before: told the robot already drives at 0.4 m/s, it may ask for 0.42 m/s at once.
+    #[test]
+    fn the_limit_is_relative_to_the_command_sent() {
+        let mut p = Limited::new(FullAhead, limits());
+        let input = |last_command| PlannerInput {
+            tick: 0,
+            dt: 0.01,
+            pose: Pose2::new(1.0, 1.0, 0.0),
+            scan: None,
+            tactile: None,
+            grid: None,
+            last_command,
+        };
+        let first = p.step(&input(Command::STOP));
+        assert!((first.v - 0.02).abs() < 1e-12, "{first:?}");
+        let cruising = Command {
+            v: 0.4,
+            ..Command::STOP
+        };
+        let c = p.step(&input(cruising));
+        assert!((c.v - 0.42).abs() < 1e-12, "{c:?}");
+        let mut status: Box<PlanStatus> = bytemuck::zeroed_box();
+        p.write_status(&mut status);
+        assert_eq!(status.mode, mole_types::MODE_EXPLORE);
     }
 
     #[test]

@@ -4,7 +4,7 @@
 use crate::obstacles::{corridor_clear, segment_free};
 use crate::{Command, Planner, PlannerInput, PlanningError, RobotLimits, usable};
 use core::f64::consts::{FRAC_PI_4, SQRT_2};
-use mole_types::{MODE_EXPLORE, Pose2, wrap_angle};
+use mole_types::{MODE_EXPLORE, PlannerKind, Pose2, wrap_angle};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -487,6 +487,7 @@ impl Planner for RandomWalk {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Limited;
     use crate::obstacles::test_support::{grid_free, scan_wall_ahead};
     use mole_types::CELL_OCCUPIED;
     use proptest::prelude::*;
@@ -501,7 +502,13 @@ mod tests {
         }
     }
 
+    /// Step `tick` at `pose`, the robot standing (nothing sent yet).
     fn input(tick: u64, pose: Pose2) -> PlannerInput<'static> {
+        sent(tick, pose, Command::STOP)
+    }
+
+    /// Step `tick` at `pose` after `last_command` was sent.
+    fn sent(tick: u64, pose: Pose2, last_command: Command) -> PlannerInput<'static> {
         PlannerInput {
             tick,
             dt: 0.01,
@@ -509,6 +516,7 @@ mod tests {
             scan: None,
             tactile: None,
             grid: None,
+            last_command,
         }
     }
 
@@ -676,15 +684,19 @@ mod tests {
 
     #[test]
     fn planner_turns_then_drives_to_the_waypoint_and_draws_the_next() {
-        let mut rw = RandomWalk::new(limits(), RandomWalkConfig::default(), 3);
+        let mut rw = Limited::new(
+            RandomWalk::new(limits(), RandomWalkConfig::default(), 3),
+            limits(),
+        );
         let mut pose = Pose2::new(2.0, 2.0, 0.0);
         let dt = 0.01;
         let mut reached = 0;
         let mut last_dir = None;
+        let mut cmd = Command::STOP;
         for tick in 0..6000 {
-            let cmd = rw.step(&input(tick, pose));
+            cmd = rw.step(&sent(tick, pose, cmd));
             assert_eq!(cmd.mode, MODE_EXPLORE);
-            if let (Some(wp), Some(d)) = (rw.target(), rw.direction()) {
+            if let (Some(wp), Some(d)) = (rw.target(), rw.inner().direction()) {
                 if last_dir.is_some_and(|(_, w): (usize, [f64; 2])| w != wp) {
                     reached += 1;
                 }
@@ -695,7 +707,7 @@ mod tests {
             pose.theta = wrap_angle(pose.theta + cmd.omega * dt);
         }
         // 60 s at ≤ 0.4 m/s with 0.5 m strides and turns: several waypoints, none by timeout.
-        let (picks, fallbacks) = rw.picks();
+        let (picks, fallbacks) = rw.inner().picks();
         assert!(reached >= 10, "reached {reached}");
         assert_eq!(picks, reached as u64 + 1);
         assert_eq!(fallbacks, 0);
@@ -793,11 +805,14 @@ mod tests {
 
     #[test]
     fn non_finite_pose_brakes_to_a_stop() {
-        let mut rw = RandomWalk::new(limits(), RandomWalkConfig::default(), 1);
+        let mut rw = Limited::new(
+            RandomWalk::new(limits(), RandomWalkConfig::default(), 1),
+            limits(),
+        );
         let mut pose = Pose2::new(1.0, 1.0, 0.0);
         let mut cmd = Command::STOP;
         for tick in 0..300 {
-            cmd = rw.step(&input(tick, pose));
+            cmd = rw.step(&sent(tick, pose, cmd));
             pose.theta = wrap_angle(pose.theta + cmd.omega * 0.01);
             pose.x += cmd.v * pose.theta.cos() * 0.01;
         }
@@ -805,7 +820,7 @@ mod tests {
         let bad = Pose2::new(f64::NAN, 1.0, 0.0);
         let mut prev = cmd;
         for tick in 300..400 {
-            let c = rw.step(&input(tick, bad));
+            let c = rw.step(&sent(tick, bad, prev));
             assert!(c.v.is_finite() && c.omega.is_finite() && c.mode == mole_types::MODE_IDLE);
             assert!(c.v.abs() <= prev.v.abs() + 1e-12 && (c.v - prev.v).abs() <= 0.02 + 1e-12);
             prev = c;
@@ -814,7 +829,7 @@ mod tests {
         // No time base: stop at once.
         let c = rw.step(&PlannerInput {
             dt: f64::NAN,
-            ..input(400, pose)
+            ..sent(400, pose, cmd)
         });
         assert_eq!(c, Command::STOP);
     }
@@ -826,11 +841,11 @@ mod tests {
             seed in 0u64..1000,
         ) {
             let l = limits();
-            let mut rw = RandomWalk::new(l, RandomWalkConfig::default(), seed);
+            let mut rw = Limited::new(RandomWalk::new(l, RandomWalkConfig::default(), seed), l);
             let mut prev = Command::STOP;
             for (t, (x, y, th, flag)) in poses.into_iter().enumerate() {
                 let x = if flag == 0 { f64::NAN } else if flag == 1 { f64::INFINITY } else { x };
-                let c = rw.step(&input(t as u64, Pose2::new(x, y, th)));
+                let c = rw.step(&sent(t as u64, Pose2::new(x, y, th), prev));
                 prop_assert!(c.v.is_finite() && c.omega.is_finite());
                 prop_assert!(c.v.abs() <= l.max_speed && c.omega.abs() <= l.max_omega);
                 prop_assert!((c.v - prev.v).abs() <= l.max_accel * 0.01 + 1e-12);

@@ -6,10 +6,10 @@
 //! growing share of the box.
 
 use mole_planning::{
-    BounceBack, BounceBackConfig, Command, Planner, PlannerInput, RandomWalk, RandomWalkConfig,
-    RobotLimits, planner_by_name,
+    BounceBack, BounceBackConfig, Command, Limited, Planner, PlannerInput, RandomWalk,
+    RandomWalkConfig, RobotLimits, planner_by_kind,
 };
-use mole_types::{MAX_BEAMS, Pose2, Scan, Tactile, wrap_angle};
+use mole_types::{MAX_BEAMS, PlannerKind, Pose2, Scan, Tactile, wrap_angle};
 use std::f64::consts::{PI, TAU};
 
 const SIDE: f64 = 5.0;
@@ -166,6 +166,7 @@ fn run(planner: &mut dyn Planner, steps: usize, lidar: bool) -> Outcome {
             scan: Some(&scan),
             tactile: Some(&tactile),
             grid: None,
+            last_command: last,
         };
         let c = planner.step(&input);
         let l = limits();
@@ -234,7 +235,8 @@ fn lidar_robot_explores_the_box_without_hitting_or_pinning() {
 
 /// One lidar run of 1000 s with `seed`; panics on the first broken promise.
 fn lidar_run(seed: u64) {
-    let mut p = planner_by_name("random-walk", limits(), seed).unwrap_or_else(|e| panic!("{e}"));
+    let mut p =
+        planner_by_kind(PlannerKind::RandomWalk, limits(), seed).unwrap_or_else(|e| panic!("{e}"));
     let o = run(p.as_mut(), 20_000, true);
     let r = limits().radius;
     // The brief's bound is r/2 of penetration; with a lidar the robot should not touch at all.
@@ -271,7 +273,8 @@ fn touch_only_robot_bounces_off_walls_and_keeps_exploring() {
 
 /// One touch-only run of 1000 s with `seed`; panics on the first broken promise.
 fn touch_run(seed: u64) {
-    let mut p = planner_by_name("random-walk", limits(), seed).unwrap_or_else(|e| panic!("{e}"));
+    let mut p =
+        planner_by_kind(PlannerKind::RandomWalk, limits(), seed).unwrap_or_else(|e| panic!("{e}"));
     let o = run(p.as_mut(), 20_000, false);
     let l = limits();
     // At full speed into a wall, the acceleration limit needs this many steps to stop.
@@ -320,8 +323,8 @@ fn touch_run(seed: u64) {
 #[test]
 fn same_seed_same_trajectory() {
     let trace = |seed| {
-        let mut p =
-            planner_by_name("random-walk", limits(), seed).unwrap_or_else(|e| panic!("{e}"));
+        let mut p = planner_by_kind(PlannerKind::RandomWalk, limits(), seed)
+            .unwrap_or_else(|e| panic!("{e}"));
         let o = run(p.as_mut(), 2_000, true);
         (o.min_wall_distance, o.coverage, o.bounces)
     };
@@ -341,7 +344,8 @@ fn lidar_bounce_back_alone_keeps_a_blind_walk_off_the_walls() {
             },
             seed,
         );
-        let mut p = BounceBack::new(walk, limits(), BounceBackConfig::default());
+        let bb = BounceBack::new(walk, limits(), BounceBackConfig::default());
+        let mut p = Limited::new(bb, limits());
         let o = run(&mut p, 20_000, true);
         let r = limits().radius;
         assert!(o.bounces > 20, "{}", o.bounces);

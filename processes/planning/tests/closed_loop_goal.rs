@@ -7,10 +7,11 @@
 
 use mole_mapping::FrontierGrid;
 use mole_planning::{
-    Dwa, DwaConfig, LocalPlanner, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
+    Command, Dwa, DwaConfig, Limited, LocalPlanner, Planner, PlannerConfig, PlannerInput,
+    RobotLimits, build_planner,
 };
 use mole_sensing::RayCaster;
-use mole_types::{Grid, MODE_DONE, MODE_ESCAPE, MODE_STALLED, Scan, Square, Tactile};
+use mole_types::{Grid, MODE_DONE, MODE_ESCAPE, MODE_STALLED, PlannerKind, Scan, Square, Tactile};
 use mole_world::{Scenario, World, load_scenario};
 use std::path::Path;
 
@@ -100,6 +101,7 @@ fn run(sc: &Scenario, planner: &mut dyn Planner, max_steps: usize, stop_at_goal:
         modes: Vec::new(),
         path_length: 0.0,
     };
+    let mut last_command = Command::STOP;
     for step in 0..max_steps {
         let pose = world.pose();
         scan.n_beams = BEAMS as u32;
@@ -120,8 +122,10 @@ fn run(sc: &Scenario, planner: &mut dyn Planner, max_steps: usize, stop_at_goal:
             scan: Some(&scan),
             tactile: Some(&tactile),
             grid: Some(&grid),
+            last_command,
         };
         let c = planner.step(&input);
+        last_command = c;
         if std::env::var("DEBUG_LOOP").is_ok() && step % 100 == 0 {
             eprintln!(
                 "{step} pose {:.2} {:.2} {:.2} cmd {:.3} {:.3} mode {}",
@@ -148,10 +152,10 @@ fn run(sc: &Scenario, planner: &mut dyn Planner, max_steps: usize, stop_at_goal:
     out
 }
 
-/// The configured planner stack `name` (DWA as local planner, seed 7), toward the scenario's
+/// The configured planner stack `kind` (DWA as local planner, seed 7), toward the scenario's
 /// goal when `goal`.
-fn build(sc: &Scenario, name: &str, goal: bool) -> Box<dyn Planner> {
-    let mut cfg = PlannerConfig::new(name);
+fn build(sc: &Scenario, kind: PlannerKind, goal: bool) -> Box<dyn Planner> {
+    let mut cfg = PlannerConfig::new(kind);
     cfg.seed = 7;
     cfg.local = LocalPlanner::Dwa;
     if goal {
@@ -160,7 +164,7 @@ fn build(sc: &Scenario, name: &str, goal: bool) -> Box<dyn Planner> {
     build_planner(&cfg, RobotLimits::from(&sc.robot)).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// The DWA alone, without the reactive layer to catch it, sees every obstacle in its lidar and
+/// The DWA alone (limited, as every stack is), without the reactive layer to catch it, sees every obstacle in its lidar and
 /// steers around them: it reaches the goal of every scenario without a single step in contact.
 #[test]
 fn dwa_alone_reaches_every_goal_without_touching_an_obstacle() {
@@ -173,10 +177,10 @@ fn dwa_alone_reaches_every_goal_without_touching_an_obstacle() {
     ] {
         let sc = scenario(name);
         let goal = sc.goal.unwrap_or_else(|| panic!("{name} has no goal"));
-        let mut dwa = Dwa::new(
-            RobotLimits::from(&sc.robot),
-            DwaConfig::default(),
-            [goal.x, goal.y],
+        let limits = RobotLimits::from(&sc.robot);
+        let mut dwa = Limited::new(
+            Dwa::new(limits, DwaConfig::default(), [goal.x, goal.y]),
+            limits,
         );
         let o = run(&sc, &mut dwa, 6000, true);
         eprintln!(
@@ -196,7 +200,7 @@ fn dwa_alone_reaches_every_goal_without_touching_an_obstacle() {
 #[test]
 fn frontier_exploration_covers_the_maze() {
     let sc = scenario("maze.toml");
-    let mut p = build(&sc, "frontier", false);
+    let mut p = build(&sc, PlannerKind::Frontier, false);
     let o = run(&sc, p.as_mut(), 12_000, false);
     eprintln!(
         "frontier maze: coverage {:.3} after {} steps ({:.0} s), path {:.1} m, done {}, steps in contact {}, bounces {}",
@@ -216,7 +220,7 @@ fn frontier_exploration_covers_the_maze() {
 #[test]
 fn apf_in_the_u_trap_reports_a_stall_and_does_not_spin_forever() {
     let sc = scenario("u_trap.toml");
-    let mut p = build(&sc, "apf", true);
+    let mut p = build(&sc, PlannerKind::Apf, true);
     let o = run(&sc, p.as_mut(), 3000, true);
     let stalled = o.modes.contains(&MODE_STALLED);
     let escaped = o.modes.contains(&MODE_ESCAPE);
@@ -243,7 +247,7 @@ fn dwa_stack_reaches_every_scenario_goal_without_touching() {
     ] {
         let sc = scenario(name);
         assert!(sc.goal.is_some(), "{name} has no goal");
-        let mut p = build(&sc, "dwa", true);
+        let mut p = build(&sc, PlannerKind::Dwa, true);
         let o = run(&sc, p.as_mut(), 6000, true);
         eprintln!(
             "dwa {name}: reached {} in {} steps ({:.1} s), path {:.1} m, steps in contact {}, bounces {}",

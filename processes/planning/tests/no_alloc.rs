@@ -1,10 +1,10 @@
 //! Every planner's step allocates nothing in steady state (a counting global allocator).
 
 use mole_planning::{
-    LocalPlanner, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
+    Command, LocalPlanner, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
 };
 use mole_runtime::{CountingAllocator, allocations_during};
-use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid, Pose2, Scan};
+use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid, PlannerKind, Pose2, Scan};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -59,20 +59,16 @@ fn every_planner_step_allocates_nothing_in_steady_state() {
     });
     assert!(boxed >= 1, "a Box was allocated, the counter saw {boxed}");
     let (grid, scan) = world();
-    for (name, local) in [
-        ("random-walk", LocalPlanner::Dwa),
-        ("apf", LocalPlanner::Dwa),
-        ("dwa", LocalPlanner::Dwa),
-        ("frontier", LocalPlanner::Dwa),
-        ("frontier", LocalPlanner::Apf),
+    for (kind, local, replan) in [
+        (PlannerKind::RandomWalk, LocalPlanner::Dwa, false),
+        (PlannerKind::Apf, LocalPlanner::Dwa, false),
+        (PlannerKind::Dwa, LocalPlanner::Dwa, false),
+        (PlannerKind::Frontier, LocalPlanner::Dwa, false),
+        (PlannerKind::Frontier, LocalPlanner::Apf, false),
         // `dwa` re-planning with APF after a bounce (`local` names the re-planner here).
-        ("dwa-replan-apf", LocalPlanner::Apf),
+        (PlannerKind::Dwa, LocalPlanner::Apf, true),
     ] {
-        let (name, replan) = match name.strip_suffix("-replan-apf") {
-            Some(n) => (n, true),
-            None => (name, false),
-        };
-        let mut cfg = PlannerConfig::new(name);
+        let mut cfg = PlannerConfig::new(kind);
         if replan {
             cfg.replan_with = Some(local);
             cfg.replan_time = 1.0;
@@ -83,6 +79,7 @@ fn every_planner_step_allocates_nothing_in_steady_state() {
         let mut p = build_planner(&cfg, limits()).unwrap_or_else(|e| panic!("{e}"));
         let mut pose = Pose2::new(2.0, 2.0, 0.3);
         let mut status: Box<mole_types::PlanStatus> = bytemuck::zeroed_box();
+        let mut last_command = Command::STOP;
         let mut step = |p: &mut Box<dyn Planner>, tick: u64, pose: &mut Pose2| {
             let input = PlannerInput {
                 tick,
@@ -91,8 +88,10 @@ fn every_planner_step_allocates_nothing_in_steady_state() {
                 scan: Some(&scan),
                 tactile: None,
                 grid: Some(&grid),
+                last_command,
             };
             let c = p.step(&input);
+            last_command = c;
             p.write_status(&mut status);
             pose.x += c.v * pose.theta.cos() * 0.05;
             pose.y += c.v * pose.theta.sin() * 0.05;
@@ -109,6 +108,6 @@ fn every_planner_step_allocates_nothing_in_steady_state() {
                 step(&mut p, tick, &mut pose);
             }
         });
-        assert_eq!(n, 0, "{name} ({local:?}) allocated {n} times in 100 steps");
+        assert_eq!(n, 0, "{kind} ({local:?}) allocated {n} times in 100 steps");
     }
 }

@@ -1,6 +1,6 @@
 use super::*;
 use crate::obstacles::test_support::{scan_uniform, scan_wall_ahead};
-use crate::{RandomWalk, RandomWalkConfig};
+use crate::{Limited, RandomWalk, RandomWalkConfig};
 use mole_types::{MODE_EXPLORE, MODE_IDLE, Pose2, Scan, Tactile};
 use proptest::prelude::Just;
 
@@ -16,34 +16,37 @@ fn limits() -> RobotLimits {
     }
 }
 
-/// Always drives straight ahead at 0.4 m/s; counts the re-plans it is asked for.
+/// Always wishes to drive straight ahead at 0.4 m/s; counts the re-plans it is asked for.
 #[derive(Debug, Default)]
 struct Forward {
-    prev: Command,
     replans: u32,
 }
 
 impl Planner for Forward {
-    fn name(&self) -> &'static str {
-        "forward"
+    fn kind(&self) -> PlannerKind {
+        PlannerKind::RandomWalk
     }
-    fn step(&mut self, input: &PlannerInput) -> Command {
-        let (v, omega) = limits().limit(&self.prev, 0.4, 0.0, input.dt);
-        self.prev = Command {
-            v,
-            omega,
+    fn step(&mut self, _input: &PlannerInput) -> Command {
+        Command {
+            v: 0.4,
+            omega: 0.0,
             mode: MODE_EXPLORE,
-        };
-        self.prev
+        }
     }
     fn replan(&mut self) {
         self.replans += 1;
     }
 }
 
+/// The layer around [`Forward`], inside [`Limited`] as `build_planner` stacks it.
+fn forward_stack() -> Limited<BounceBack<Forward>> {
+    let bb = BounceBack::new(Forward::default(), limits(), BounceBackConfig::default());
+    Limited::new(bb, limits())
+}
+
 /// Runs one step with `scan` and `tactile`, moves `pose` by the command, checks the limits.
 struct Rig {
-    bb: BounceBack<Forward>,
+    stack: Limited<BounceBack<Forward>>,
     pose: Pose2,
     tick: u64,
     last: Command,
@@ -52,11 +55,15 @@ struct Rig {
 impl Rig {
     fn new() -> Self {
         Self {
-            bb: BounceBack::new(Forward::default(), limits(), BounceBackConfig::default()),
+            stack: forward_stack(),
             pose: Pose2::new(1.0, 1.0, 0.0),
             tick: 0,
             last: Command::STOP,
         }
+    }
+    /// The bounce-back layer.
+    fn bb(&self) -> &BounceBack<Forward> {
+        self.stack.inner()
     }
     fn step(&mut self, scan: Option<&Scan>, tactile: Option<&Tactile>) -> Command {
         let input = PlannerInput {
@@ -66,8 +73,9 @@ impl Rig {
             scan,
             tactile,
             grid: None,
+            last_command: self.last,
         };
-        let c = self.bb.step(&input);
+        let c = self.stack.step(&input);
         let l = limits();
         assert!(
             c.v.abs() <= l.max_speed && c.omega.abs() <= l.max_omega,
@@ -112,25 +120,25 @@ fn wall_ahead_triggers_reverse_turn_and_replan_with_hysteresis() {
     for _ in 0..50 {
         rig.step(Some(&open), None);
     }
-    assert!((rig.last.v - 0.4).abs() < 1e-9 && rig.bb.bounces() == 0);
+    assert!((rig.last.v - 0.4).abs() < 1e-9 && rig.bb().bounces() == 0);
     // A wall 0.1 m (d_obs) ahead: below d_th = 0.15.
     let close = scan_wall_ahead(180, 0.2 + 0.1, 4.0);
     let band = scan_wall_ahead(180, 0.2 + 0.25, 4.0);
     let c = rig.step(Some(&close), None);
-    assert_eq!((rig.bb.bounces(), c.mode), (1, MODE_BOUNCE_BACK));
+    assert_eq!((rig.bb().bounces(), c.mode), (1, MODE_BOUNCE_BACK));
     assert!(
-        matches!(rig.bb.phase(), Phase::Reversing { v_rev, .. } if (v_rev + 0.2).abs() < 1e-12)
+        matches!(rig.bb().phase(), Phase::Reversing { v_rev, .. } if (v_rev + 0.2).abs() < 1e-12)
     );
     // It reverses: −α·v = −0.2 m/s, reached within the acceleration limit (0.6 m/s at 2 m/s²).
     let mut min_v = f64::INFINITY;
     let mut steps = 0;
     while matches!(
-        rig.bb.phase(),
+        rig.bb().phase(),
         Phase::Reversing { .. } | Phase::Turning { .. }
     ) && steps < 1000
     {
         let c = rig.step(Some(&band), None);
-        let handed_back = matches!(rig.bb.phase(), Phase::Disarmed { .. });
+        let handed_back = matches!(rig.bb().phase(), Phase::Disarmed { .. });
         assert_eq!(
             c.mode,
             if handed_back {
@@ -144,24 +152,24 @@ fn wall_ahead_triggers_reverse_turn_and_replan_with_hysteresis() {
     }
     assert!((min_v + 0.2).abs() < 1e-9, "{min_v}");
     assert!(
-        matches!(rig.bb.phase(), Phase::Disarmed { .. }),
+        matches!(rig.bb().phase(), Phase::Disarmed { .. }),
         "{:?}",
-        rig.bb.phase()
+        rig.bb().phase()
     );
     // Turned toward the freest direction: away from the wall (it was ahead, at θ = 0).
     assert!(rig.pose.theta.abs() > PI - 0.2, "{}", rig.pose.theta);
-    assert_eq!(rig.bb.inner().replans, 1);
+    assert_eq!(rig.bb().inner().replans, 1);
     // d_obs stays in [d_th, d_release] for 10 s, longer than the cooldown: no re-trigger.
     for _ in 0..1000 {
         let c = rig.step(Some(&band), None);
         assert_eq!(c.mode, MODE_EXPLORE);
     }
-    assert_eq!(rig.bb.bounces(), 1);
+    assert_eq!(rig.bb().bounces(), 1);
     // Clear (d_obs > d_release), then close again: re-armed, it triggers.
     rig.step(Some(&open), None);
-    assert_eq!(rig.bb.phase(), Phase::Armed);
+    assert_eq!(rig.bb().phase(), Phase::Armed);
     rig.step(Some(&close), None);
-    assert_eq!(rig.bb.bounces(), 2);
+    assert_eq!(rig.bb().bounces(), 2);
 }
 
 #[test]
@@ -177,9 +185,10 @@ fn without_a_release_the_cooldown_re_arms() {
         scan: Some(&close),
         tactile: None,
         grid: None,
+        last_command: Command::STOP,
     };
-    let mut stand = BounceBack::new(Forward::default(), limits(), BounceBackConfig::default());
-    stand.step(&standing);
+    let mut stand = forward_stack();
+    standing.last_command = stand.step(&standing);
     assert_eq!(stand.bounces(), 0);
     // ...until the robot moves.
     standing.tick = 1;
@@ -189,13 +198,13 @@ fn without_a_release_the_cooldown_re_arms() {
         rig.step(None, None);
     }
     rig.step(Some(&close), None);
-    assert_eq!(rig.bb.bounces(), 1);
+    assert_eq!(rig.bb().bounces(), 1);
     // The wall stays 0.1 m ahead whatever the robot does (a sensor glitch or a pushed robot):
     // it bounces again only after each cooldown, never every step.
     for _ in 0..1500 {
         rig.step(Some(&close), None);
     }
-    let b = rig.bb.bounces();
+    let b = rig.bb().bounces();
     // 15 s: each cycle is ≤ 0.8 s reversing + a turn (π at ≤ 2 rad/s ≈ 1.6 s) + 3 s cooldown.
     assert!((2..=5).contains(&b), "{b}");
 }
@@ -212,24 +221,23 @@ fn tactile_contact_triggers_and_backs_away_from_the_touched_side() {
     // Sensor 0 (front) is pushed backwards: the obstacle is ahead.
     t.sensors[0].fx = -5.0;
     let c = rig.step(None, Some(&t));
-    assert_eq!((rig.bb.bounces(), c.mode), (1, MODE_BOUNCE_BACK));
+    assert_eq!((rig.bb().bounces(), c.mode), (1, MODE_BOUNCE_BACK));
     assert!(
-        matches!(rig.bb.phase(), Phase::Reversing { v_rev, target, .. } if v_rev < 0.0 && target.abs() > 3.0)
+        matches!(rig.bb().phase(), Phase::Reversing { v_rev, target, .. } if v_rev < 0.0 && target.abs() > 3.0)
     );
     // A touch below the threshold (noise) does not trigger.
     let mut rig = Rig::new();
     t.sensors[0].fx = -0.3;
     rig.step(None, Some(&t));
-    assert_eq!(rig.bb.bounces(), 0);
+    assert_eq!(rig.bb().bounces(), 0);
     // From standstill, touched from behind (pushed forward): back away forward.
     let mut rig = Rig::new();
-    rig.bb.inner.prev = Command::STOP;
     t.sensors[0].fx = 0.0;
     t.sensors[4].angle = PI as f32;
     t.sensors[4].fx = 5.0;
     rig.step(None, Some(&t));
     assert!(
-        matches!(rig.bb.phase(), Phase::Reversing { v_rev, .. } if (v_rev - 0.1).abs() < 1e-12)
+        matches!(rig.bb().phase(), Phase::Reversing { v_rev, .. } if (v_rev - 0.1).abs() < 1e-12)
     );
 }
 
@@ -246,7 +254,7 @@ fn speed_is_capped_so_the_robot_can_stop_before_the_wall() {
     // Disarmed after a bounce (no range trigger), a wall 0.14 m (d_obs) ahead, below d_th: the
     // cap brakes the robot to a stop about d_stop short of it; held there while the wrapped
     // planner presses on, it bounces instead of waiting for the cooldown.
-    rig.bb.phase = Phase::Disarmed { since: rig.tick };
+    rig.stack.inner_mut().phase = Phase::Disarmed { since: rig.tick };
     let wall_x = rig.pose.x + 0.2 + 0.14;
     let mut closest = f64::INFINITY;
     let mut stopped_before_bounce = false;
@@ -254,13 +262,13 @@ fn speed_is_capped_so_the_robot_can_stop_before_the_wall() {
         let scan = scan_wall_ahead(180, wall_x - rig.pose.x, 4.0);
         rig.step(Some(&scan), None);
         closest = closest.min(wall_x - rig.pose.x - 0.2);
-        if rig.bb.bounces() == 0 && rig.last.v.abs() < 0.05 {
+        if rig.bb().bounces() == 0 && rig.last.v.abs() < 0.05 {
             stopped_before_bounce = true;
         }
     }
     assert!(stopped_before_bounce);
     assert!(closest > 0.03 && closest < 0.06, "{closest}");
-    assert_eq!(rig.bb.bounces(), 1);
+    assert_eq!(rig.bb().bounces(), 1);
 }
 
 #[test]
@@ -280,10 +288,13 @@ fn non_finite_pose_stops_and_never_outputs_nan() {
 
 #[test]
 fn random_walk_inside_bounce_back_reports_its_bounces_through_the_trait() {
-    let mut p: Box<dyn Planner> = Box::new(BounceBack::new(
-        RandomWalk::new(limits(), RandomWalkConfig::default(), 1),
+    let mut p: Box<dyn Planner> = Box::new(Limited::new(
+        BounceBack::new(
+            RandomWalk::new(limits(), RandomWalkConfig::default(), 1),
+            limits(),
+            BounceBackConfig::default(),
+        ),
         limits(),
-        BounceBackConfig::default(),
     ));
     let mut t: Box<Tactile> = bytemuck::zeroed_box();
     t.n_sensors = 1;
@@ -295,11 +306,12 @@ fn random_walk_inside_bounce_back_reports_its_bounces_through_the_trait() {
         scan: None,
         tactile: Some(&t),
         grid: None,
+        last_command: Command::STOP,
     };
     let c = p.step(&input);
     assert_eq!(
-        (p.bounces(), c.mode, p.name()),
-        (1, MODE_BOUNCE_BACK, "random-walk")
+        (p.bounces(), c.mode, p.kind()),
+        (1, MODE_BOUNCE_BACK, PlannerKind::RandomWalk)
     );
 }
 
@@ -338,7 +350,7 @@ proptest::proptest! {
     ) {
         let l = limits();
         let walk = RandomWalk::new(l, RandomWalkConfig::default(), seed);
-        let mut p = BounceBack::new(walk, l, BounceBackConfig::default());
+        let mut p = Limited::new(BounceBack::new(walk, l, BounceBackConfig::default()), l);
         let mut prev = Command::STOP;
         let mut scan: Box<Scan> = bytemuck::zeroed_box();
         let mut tactile: Box<Tactile> = bytemuck::zeroed_box();
@@ -359,6 +371,7 @@ proptest::proptest! {
                 scan: Some(&scan),
                 tactile: Some(&tactile),
                 grid: None,
+                last_command: prev,
             };
             let c = p.step(&input);
             proptest::prop_assert!(c.v.is_finite() && c.omega.is_finite());

@@ -6,7 +6,7 @@
 use mole_mapping::FrontierGrid;
 use mole_planning::{Command, Planner, PlannerInput};
 use mole_sensing::Sensing;
-use mole_types::{Grid, MODE_DONE, Scan, Tactile, Truth, WorldMap};
+use mole_types::{Grid, Scan, Tactile, Truth, WorldMap};
 use mole_world::{Scenario, World, load_scenario};
 use std::hash::{DefaultHasher, Hash, Hasher};
 use std::path::Path;
@@ -28,8 +28,6 @@ pub struct Outcome {
     pub steps: usize,
     /// The last command's mode.
     pub last_mode: u32,
-    /// The first step whose command was `MODE_DONE`, if any.
-    pub done_at: Option<usize>,
     /// The first step after which the world saw the robot within the goal tolerance.
     pub goal_at: Option<usize>,
     /// Share of the free cells reachable from the start that the frontier grid marks explored.
@@ -61,10 +59,10 @@ pub fn run(
     let mut tactile: Box<Tactile> = bytemuck::zeroed_box();
     let mut grid: Box<Grid> = bytemuck::zeroed_box();
     let mut hasher = DefaultHasher::new();
+    let mut last_command = Command::STOP;
     let mut out = Outcome {
         steps: 0,
         last_mode: 0,
-        done_at: None,
         goal_at: None,
         coverage: 0.0,
         bounces: 0,
@@ -83,8 +81,10 @@ pub fn run(
             scan: Some(&scan),
             tactile: Some(&tactile),
             grid: (step > 0).then_some(&*grid),
+            last_command,
         };
         let c = planner.step(&input);
+        last_command = c;
         (c.v.to_bits(), c.omega.to_bits(), c.mode).hash(&mut hasher);
         fg.integrate_footprint(pose, sc.robot.radius);
         fg.integrate_scan(pose, &scan);
@@ -93,9 +93,6 @@ pub fn run(
         out.steps = step + 1;
         out.last_mode = c.mode;
         out.contact_steps += usize::from(!world.contacts().is_empty());
-        if c.mode == MODE_DONE && out.done_at.is_none() {
-            out.done_at = Some(step);
-        }
         if world.goal_reached() && out.goal_at.is_none() {
             out.goal_at = Some(step);
         }
