@@ -4,7 +4,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use mole_localization::pf::{ParticleFilter, PfConfig};
-use mole_localization::{BayesConfig, Ekf, Estimator, HistogramFilter};
+use mole_localization::{BayesConfig, Ekf, Estimator, HistogramFilter, Readings};
 use mole_types::{BeaconReading, BeaconSite, Beacons, Fix, Odom, WorldMap};
 use std::hint::black_box;
 
@@ -49,6 +49,17 @@ struct Inputs {
     fix: Fix,
 }
 
+impl Inputs {
+    /// The step's readings, every sensor present.
+    fn readings(&self) -> Readings<'_> {
+        Readings {
+            odom: &self.odom,
+            beacons: Some(&self.beacons),
+            fix: Some(&self.fix),
+        }
+    }
+}
+
 fn inputs(map: &WorldMap, k: usize) -> Inputs {
     let (x, y) = (map.start_x + 0.005 * (k % 400) as f64, map.start_y);
     let mut odom: Odom = bytemuck::Zeroable::zeroed();
@@ -73,16 +84,14 @@ fn bench_step(c: &mut Criterion, name: &str, est: &mut dyn Estimator, map: &Worl
     let steps: Vec<Inputs> = (0..64).map(|k| inputs(map, k)).collect();
     // Steady state first.
     for s in &steps {
-        est.predict(&s.odom);
-        est.correct(&s.beacons, &s.fix);
+        est.step(&s.readings());
     }
     let mut k = 0;
     c.bench_function(name, |b| {
         b.iter(|| {
             let s = &steps[k % steps.len()];
             k += 1;
-            est.predict(black_box(&s.odom));
-            est.correct(black_box(&s.beacons), black_box(&s.fix));
+            est.step(black_box(&s.readings()));
             black_box(est.pose())
         })
     });

@@ -14,7 +14,7 @@
 
 use crate::models::{BeaconTable, odometry_is_plausible, sinc, wrap_near};
 use crate::noise::NoiseModel;
-use crate::{Estimator, ReadingError};
+use crate::{Estimator, ReadingError, Readings};
 use core::f64::consts::{PI, TAU};
 use mole_types::{
     BeaconReading, BeaconSite, Beacons, EstimatorKind, Fix, MAX_BEACONS, Odom, Pose2, WorldMap,
@@ -426,27 +426,31 @@ impl HistogramFilter {
     /// Correction (algorithms §6.3), Bel(x_t) = η p(z_t | x_t) Bel̄(x_t), with the beacon readings
     /// (range and bearing, bearing error wrapped) and the fix as independent Gaussians; σ are
     /// inflated by the in-cell spread (cell²/6 on ranges and positions, bin²/12 and
-    /// (cell/d)²/6 on bearings). Returns how many readings were used.
-    pub fn apply_correction(&mut self, beacons: &Beacons, fix: &Fix) -> usize {
-        if beacons.n_readings as usize > beacons.readings.len() {
-            self.ignored += 1;
-        }
+    /// (cell/d)²/6 on bearings); `None` for a sensor without a reading this step. Returns how
+    /// many readings were used.
+    pub fn apply_correction(&mut self, beacons: Option<&Beacons>, fix: Option<&Fix>) -> usize {
         let mut n = 0;
-        for r in beacons.readings() {
-            match self.queue_beacon(n, r) {
-                Ok(()) => n += 1,
-                Err(_) => self.ignored += 1,
+        if let Some(beacons) = beacons {
+            if beacons.n_readings as usize > beacons.readings.len() {
+                self.ignored += 1;
+            }
+            for r in beacons.readings() {
+                match self.queue_beacon(n, r) {
+                    Ok(()) => n += 1,
+                    Err(_) => self.ignored += 1,
+                }
             }
         }
-        let use_fix = match fix.valid {
-            0 => false,
-            1 if fix.x.is_finite() && fix.y.is_finite() => true,
-            _ => {
+        let fix = match fix {
+            None => None,
+            Some(fix) if fix.valid == 0 => None,
+            Some(fix) if fix.valid == 1 && fix.x.is_finite() && fix.y.is_finite() => Some(fix),
+            Some(_) => {
                 self.ignored += 1;
-                false
+                None
             }
         };
-        if n == 0 && !use_fix {
+        if n == 0 && fix.is_none() {
             return 0;
         }
         let (nx, ny, n_cells) = (self.nx, self.ny, self.nx * self.ny);
@@ -461,7 +465,7 @@ impl HistogramFilter {
                 *l += kr * e * e;
             }
         }
-        if use_fix {
+        if let Some(fix) = fix {
             let kf = -0.5 / (self.noise.q_fix(fix.std)[(0, 0)] + spread);
             for iy in 0..ny {
                 let ey = fix.y - (iy as f64 + 0.5) * self.cell;
@@ -502,7 +506,7 @@ impl HistogramFilter {
             }
         }
         self.finish();
-        n + usize::from(use_fix)
+        n + usize::from(fix.is_some())
     }
 
     /// η: normalises the belief (a belief with no mass left becomes uniform), prunes, and
@@ -620,8 +624,8 @@ impl Estimator for HistogramFilter {
         let _ = self.predict_with(odom.v, odom.omega, odom.dt);
     }
 
-    fn correct(&mut self, beacons: &Beacons, fix: &Fix) {
-        self.apply_correction(beacons, fix);
+    fn correct(&mut self, readings: &Readings<'_>) {
+        self.apply_correction(readings.beacons, readings.fix);
     }
 
     fn pose(&self) -> Pose2 {

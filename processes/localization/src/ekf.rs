@@ -11,9 +11,9 @@ use crate::models::{
     unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v,
 };
 use crate::noise::NoiseModel;
-use crate::{Estimator, ReadingError};
+use crate::{Estimator, ReadingError, Readings};
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, EstimatorKind, Fix, Odom, Pose2, WorldMap, wrap_angle,
+    BeaconReading, BeaconSite, EstimatorKind, Fix, Odom, Pose2, WorldMap, wrap_angle,
 };
 use nalgebra::{Cholesky, Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
 
@@ -271,15 +271,19 @@ impl Estimator for Ekf {
     }
 
     /// Sequential updates, one per beacon reading in order, then the fix.
-    fn correct(&mut self, beacons: &Beacons, fix: &Fix) {
-        if beacons.n_readings as usize > beacons.readings.len() {
-            self.ignored += 1;
+    fn correct(&mut self, readings: &Readings<'_>) {
+        if let Some(beacons) = readings.beacons {
+            if beacons.n_readings as usize > beacons.readings.len() {
+                self.ignored += 1;
+            }
+            for reading in beacons.readings() {
+                // Refusals are counted inside.
+                let _ = self.correct_beacon(reading);
+            }
         }
-        for reading in beacons.readings() {
-            // Refusals are counted inside.
-            let _ = self.correct_beacon(reading);
+        if let Some(fix) = readings.fix {
+            let _ = self.correct_fix(fix);
         }
-        let _ = self.correct_fix(fix);
     }
 
     fn pose(&self) -> Pose2 {

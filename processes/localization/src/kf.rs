@@ -14,8 +14,8 @@
 use crate::kalman::{KalmanError, kalman_correct, symmetrize};
 use crate::models::odometry_is_plausible;
 use crate::noise::NoiseModel;
-use crate::{Estimator, ReadingError};
-use mole_types::{Beacons, EstimatorKind, Fix, Odom, Pose2, WorldMap, wrap_angle};
+use crate::{Estimator, ReadingError, Readings};
+use mole_types::{EstimatorKind, Fix, Odom, Pose2, WorldMap, wrap_angle};
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Matrix4x2, SMatrix, SVector, Vector2, Vector4};
 
 /// Initial position σ (m) of [`Kf::from_map`], as for the EKF.
@@ -245,8 +245,10 @@ impl Estimator for Kf {
     }
 
     /// Only the fix: the beacons' range-bearing model is nonlinear, outside the KF's reach.
-    fn correct(&mut self, _beacons: &Beacons, fix: &Fix) {
-        let _ = self.correct_fix(fix);
+    fn correct(&mut self, readings: &Readings<'_>) {
+        if let Some(fix) = readings.fix {
+            let _ = self.correct_fix(fix);
+        }
     }
 
     fn pose(&self) -> Pose2 {

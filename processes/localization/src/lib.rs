@@ -1,10 +1,13 @@
-//! Localization: histogram Bayes filter, KF, EKF, PF (algorithms §6).
+//! Localization and SLAM: histogram Bayes filter, KF, EKF, PF (algorithms §6) and EKF-SLAM,
+//! FastSLAM, GraphSLAM (algorithms §6.9).
 //!
-//! Every estimator implements [`Estimator`]: the process main calls `predict` with the odometry
-//! of a step, then `correct` with that step's beacon readings and position fix, then
-//! `write_pose` into the loaned `localization/pose` sample. The pieces the four estimators share
-//! live beside them: the motion and measurement models ([`models`]), the noise ([`NoiseModel`]),
-//! the generic Kalman correction ([`kalman`]) and the beacon lookup ([`BeaconTable`]).
+//! Every estimator implements [`Estimator`]: the process main hands it each step's
+//! [`Readings`] (`step` = `predict` with the odometry, then `correct` with whatever correction
+//! readings the step has), then `write_pose` into the loaned `localization/pose` sample and, for
+//! the SLAM estimators, `write_landmarks` into `localization/landmarks`. The pieces the
+//! estimators share live beside them: the motion and measurement models ([`models`]), the noise
+//! ([`NoiseModel`]), the generic Kalman correction ([`kalman`]) and the beacon lookup
+//! ([`BeaconTable`]; the localisers only: a SLAM estimator never reads the beacon positions).
 //!
 //! Naming follows the seed (after Thrun, *Probabilistic Robotics*): R_t is the PROCESS noise
 //! covariance, Q_t the MEASUREMENT noise covariance.
@@ -27,19 +30,39 @@ pub use models::BeaconTable;
 pub use noise::NoiseModel;
 pub use pf::{ParticleFilter, PfConfig, low_variance_resample};
 
+pub use graph_slam::GraphSlamEstimator;
 pub use mole_types::EstimatorKind;
-use mole_types::{Beacons, Fix, Odom, Particles, Pose, Pose2, WorldMap};
+use mole_types::{Beacons, Fix, Landmarks, Odom, Particles, Pose, Pose2, WorldMap};
+pub use slam::{EkfSlamEstimator, FastSlamEstimator};
 use thiserror::Error;
 
-/// What every estimator does each step; the process main calls predict, then correct, then
-/// write_pose.
+/// The readings of one step: the odometry, and each correction sensor's reading when it has one
+/// of this step (`None`: no reading of that sensor this step). A new sensor is one more field.
+#[derive(Debug, Clone, Copy)]
+pub struct Readings<'a> {
+    /// The control u_t = (v, ω) over dt that moved the robot into this step.
+    pub odom: &'a Odom,
+    /// The beacon readings (range, bearing) of this step.
+    pub beacons: Option<&'a Beacons>,
+    /// The position fix of this step (it may still say `valid == 0`: no fix).
+    pub fix: Option<&'a Fix>,
+}
+
+/// What every estimator does each step; the process main calls step (predict, then correct),
+/// then write_pose, and write_landmarks for the SLAM estimators.
 pub trait Estimator {
     /// The estimator's id, `mole_types::ESTIMATOR_EKF` etc.
     fn id(&self) -> u32;
     /// Prediction step (algorithms §6.3): moves the belief by the control u_t = (v, ω) over `odom.dt`.
     fn predict(&mut self, odom: &Odom);
-    /// Correction step (algorithms §6.3): folds in this step's beacon readings and, when valid, the fix.
-    fn correct(&mut self, beacons: &Beacons, fix: &Fix);
+    /// Correction step (algorithms §6.3): folds in every correction reading `readings` holds
+    /// (beacons, fix), and nothing for the sensors that are `None`.
+    fn correct(&mut self, readings: &Readings<'_>);
+    /// One step: predict with `readings.odom`, then correct with the rest.
+    fn step(&mut self, readings: &Readings<'_>) {
+        self.predict(readings.odom);
+        self.correct(readings);
+    }
     /// The mean pose, θ wrapped to (−π, π].
     fn pose(&self) -> Pose2;
     /// Σ over (x, y, θ), row-major.
@@ -65,6 +88,14 @@ pub trait Estimator {
     /// its header) and returns true, for estimators that have a particle set (the PF); the
     /// others return false and leave `out` alone, and nothing should be published.
     fn write_particles(&self, out: &mut Particles) -> bool {
+        let _ = out;
+        false
+    }
+    /// Fills `n_landmarks`, `estimator` and the landmarks (id, mean, 2×2 covariance) of the
+    /// loaned `localization/landmarks` sample (never its header) and returns true, for the
+    /// SLAM estimators; the others return false and leave `out` alone, and nothing should be
+    /// published.
+    fn write_landmarks(&self, out: &mut Landmarks) -> bool {
         let _ = out;
         false
     }
@@ -117,13 +148,15 @@ impl From<KalmanError> for ReadingError {
 /// Errors of the localization library.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum LocalizationError {
-    /// The SLAM estimators exist as libraries but do not run in the process yet (issue #12).
-    #[error("estimator `{0}` does not run in the stack yet")]
-    NotInTheStack(EstimatorKind),
+    /// GraphSLAM's smoother thread could not be started.
+    #[error("cannot start the GraphSLAM smoother thread: {0}")]
+    Smoother(String),
 }
 
-/// Builds estimator `kind` for the world in `map` (start pose, sensor noise, beacons; the PF
-/// also the seed) with its default configuration. All buffers are allocated here.
+/// Builds estimator `kind` for the world in `map` with its default configuration: the
+/// localisers from the start pose, sensor noise and beacons (the PF also the seed); the SLAM
+/// estimators from the start pose, sensor noise and seed only (never the beacons). All buffers
+/// are allocated here (GraphSLAM also starts its smoother thread).
 pub fn build_estimator(
     kind: EstimatorKind,
     map: &WorldMap,
@@ -133,10 +166,42 @@ pub fn build_estimator(
         EstimatorKind::Kf => Box::new(Kf::from_map(map)),
         EstimatorKind::Ekf => Box::new(Ekf::from_map(map)),
         EstimatorKind::Pf => Box::new(ParticleFilter::from_map(map)),
-        EstimatorKind::EkfSlam | EstimatorKind::FastSlam | EstimatorKind::GraphSlam => {
-            return Err(LocalizationError::NotInTheStack(kind));
+        EstimatorKind::EkfSlam => Box::new(EkfSlamEstimator::from_map(map)),
+        EstimatorKind::FastSlam => Box::new(FastSlamEstimator::from_map(map)),
+        EstimatorKind::GraphSlam => Box::new(GraphSlamEstimator::from_map(map)?),
+    })
+}
+
+/// Builds estimator `kind` to go on from another estimator's output (a swap or a restart):
+/// from `pose` and, for the SLAM kinds, from `landmarks` too. The localisers start at the
+/// pose's mean with their usual initial uncertainty (as [`build_estimator`] at the start pose);
+/// the SLAM estimators start at N(pose, its covariance) with every usable landmark of
+/// `landmarks` (mean and 2×2 covariance, uncorrelated with the pose and with each other: the
+/// message carries no cross-covariances). Landmarks that are not finite and positive definite
+/// are skipped and counted as ignored.
+pub fn resume(
+    kind: EstimatorKind,
+    map: &WorldMap,
+    pose: &Pose,
+    landmarks: Option<&Landmarks>,
+) -> Result<Box<dyn Estimator>, LocalizationError> {
+    Ok(match kind {
+        EstimatorKind::EkfSlam => Box::new(EkfSlamEstimator::resume(map, pose, landmarks)),
+        EstimatorKind::FastSlam => Box::new(FastSlamEstimator::resume(map, pose, landmarks)),
+        EstimatorKind::GraphSlam => Box::new(GraphSlamEstimator::resume(map, pose, landmarks)?),
+        EstimatorKind::Bayes | EstimatorKind::Kf | EstimatorKind::Ekf | EstimatorKind::Pf => {
+            build_estimator(kind, &starting_at(map, pose))?
         }
     })
+}
+
+/// The map with its start pose moved to `pose`.
+fn starting_at(map: &WorldMap, pose: &Pose) -> Box<WorldMap> {
+    let mut moved = Box::new(*map);
+    moved.start_x = pose.x;
+    moved.start_y = pose.y;
+    moved.start_theta = pose.theta;
+    moved
 }
 
 #[cfg(test)]
@@ -153,6 +218,8 @@ pub(crate) mod test_support {
 mod tests {
     use super::*;
 
+    /// Every kind builds, starts at the start pose, and publishes particles (PF) or landmarks
+    /// (SLAM kinds) exactly when it has them.
     #[test]
     fn build_estimator_builds_every_filter() {
         let mut map = test_support::zeroed_map();
@@ -161,12 +228,8 @@ mod tests {
         map.start_x = 1.0;
         map.start_y = 1.0;
         let mut particles: Box<Particles> = bytemuck::zeroed_box();
-        for kind in [
-            EstimatorKind::Bayes,
-            EstimatorKind::Kf,
-            EstimatorKind::Ekf,
-            EstimatorKind::Pf,
-        ] {
+        let mut landmarks: Box<Landmarks> = bytemuck::zeroed_box();
+        for &kind in EstimatorKind::ALL {
             let est = build_estimator(kind, &map).unwrap();
             assert_eq!(est.id(), kind.code());
             let p = est.pose();
@@ -178,6 +241,7 @@ mod tests {
                 est.write_particles(&mut particles),
                 kind == EstimatorKind::Pf
             );
+            assert_eq!(est.write_landmarks(&mut landmarks), kind.is_slam());
         }
         assert_eq!(particles.n_particles as usize, pf::DEFAULT_PARTICLES);
     }

@@ -10,10 +10,10 @@
 
 use crate::models::{BeaconTable, MIN_RANGE, odometry_is_plausible, sinc, wrap_near};
 use crate::noise::NoiseModel;
-use crate::{Estimator, ReadingError};
+use crate::{Estimator, ReadingError, Readings};
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, EstimatorKind, Fix, MAX_PARTICLES, Odom, Particle,
-    Particles, Pose2, WorldMap, wrap_angle,
+    BeaconReading, BeaconSite, EstimatorKind, Fix, MAX_PARTICLES, Odom, Particle, Particles, Pose2,
+    WorldMap, wrap_angle,
 };
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -438,15 +438,23 @@ impl Estimator for ParticleFilter {
 
     /// Weights from every beacon reading and the fix, normalisation (log-sum-exp), and
     /// low-variance resampling when N_eff < threshold · J.
-    fn correct(&mut self, beacons: &Beacons, fix: &Fix) {
-        if beacons.n_readings as usize > beacons.readings.len() {
-            self.ignored += 1;
+    /// A step without any correction reading changes nothing.
+    fn correct(&mut self, readings: &Readings<'_>) {
+        if readings.beacons.is_none() && readings.fix.is_none() {
+            return;
         }
-        for reading in beacons.readings() {
-            // Refusals are counted inside.
-            let _ = self.weigh_beacon(reading);
+        if let Some(beacons) = readings.beacons {
+            if beacons.n_readings as usize > beacons.readings.len() {
+                self.ignored += 1;
+            }
+            for reading in beacons.readings() {
+                // Refusals are counted inside.
+                let _ = self.weigh_beacon(reading);
+            }
         }
-        let _ = self.weigh_fix(fix);
+        if let Some(fix) = readings.fix {
+            let _ = self.weigh_fix(fix);
+        }
         let n_eff = self.normalise();
         // Summarise before resampling: the weighted set is the better estimate of the mean.
         self.summarise();
@@ -488,6 +496,7 @@ impl Estimator for ParticleFilter {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+    use mole_types::Beacons;
     use proptest::prelude::*;
 
     #[test]
@@ -578,9 +587,14 @@ mod tests {
         }
         beacons.n_readings = 3;
         let fix: Fix = bytemuck::Zeroable::zeroed();
+        let still: Odom = bytemuck::Zeroable::zeroed();
         for _ in 0..10 {
             pf.predict_with(0.0, 0.0, 0.01).unwrap();
-            pf.correct(&beacons, &fix);
+            pf.correct(&Readings {
+                odom: &still,
+                beacons: Some(&beacons),
+                fix: Some(&fix),
+            });
             let s: f64 = pf.weights().iter().sum();
             assert_relative_eq!(s, 1.0, epsilon = 1e-12);
         }

@@ -8,7 +8,7 @@
 
 use mole_localization::kf::KalmanFilter;
 use mole_localization::models::unicycle_g;
-use mole_localization::{Ekf, Estimator};
+use mole_localization::{Ekf, Estimator, Readings};
 use mole_sensing::Sensing;
 use mole_types::{BeaconSite, Beacons, Fix, Odom, Truth, WorldMap, wrap_angle};
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Matrix4x2, Vector2, Vector3, Vector4};
@@ -96,8 +96,11 @@ fn ekf_run(seed: u64, steps: usize) -> f64 {
         sensing.odom(&truth, &mut odom);
         sensing.beacons(&truth, &mut beacons);
         sensing.fix(&truth, &mut fix);
-        ekf.predict(&odom);
-        ekf.correct(&beacons, &fix);
+        ekf.step(&Readings {
+            odom: &odom,
+            beacons: Some(&beacons),
+            fix: Some(&fix),
+        });
         let mut e = x - ekf.mu;
         e[2] = wrap_angle(e[2]);
         let chol = ekf.sigma.cholesky().expect("Σ stays SPD");

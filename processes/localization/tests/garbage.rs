@@ -1,14 +1,17 @@
 //! Garbage in never poisons an estimator: every estimator takes arbitrary odometry, beacon
 //! readings (NaN, infinities, absurd but finite values, unknown ids, counts above capacity) and
 //! fixes (bad flags, NaN) in any order, and after every step still publishes a finite pose and a
-//! finite covariance; the histogram's belief stays a distribution and the PF's weights stay
-//! normalised. Odometry no robot could produce is ignored and counted, and leaves the pose alone.
+//! finite covariance; the histogram's belief stays a distribution, the PF's weights stay
+//! normalised and the SLAM estimators' landmarks pass the message's own validation. Odometry no robot could produce is ignored and counted, and leaves the pose alone.
 
 use mole_localization::models::{MAX_ODOM_DT, MAX_ODOM_SPEED, MAX_ODOM_TURN_RATE};
 use mole_localization::{
-    BayesConfig, Ekf, Estimator, HistogramFilter, Kf, ParticleFilter, PfConfig,
+    BayesConfig, Ekf, EkfSlamEstimator, Estimator, FastSlamEstimator, GraphSlamEstimator,
+    HistogramFilter, Kf, ParticleFilter, PfConfig, Readings,
 };
-use mole_types::{BeaconReading, BeaconSite, Beacons, Fix, Odom, Particles, Pose, WorldMap};
+use mole_types::{
+    BeaconReading, BeaconSite, Beacons, Fix, Landmarks, Message, Odom, Particles, Pose, WorldMap,
+};
 use proptest::prelude::*;
 
 #[path = "common/garbage.rs"]
@@ -102,6 +105,18 @@ fn check_summary(name: &str, est: &dyn Estimator) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+/// A SLAM estimator's summary is usable and its landmarks message passes validation.
+fn check_slam(name: &str, est: &dyn Estimator) -> Result<(), TestCaseError> {
+    check_summary(name, est)?;
+    let mut out: Box<Landmarks> = bytemuck::zeroed_box();
+    prop_assert!(
+        est.write_landmarks(&mut out),
+        "{name}: no landmarks written"
+    );
+    prop_assert!(out.validate().is_ok(), "{name}: {:?}", out.validate());
+    Ok(())
+}
+
 /// The histogram's belief is a distribution: every cell finite and ≥ 0, Σ Bel = 1 within 1e-9.
 fn check_belief(f: &HistogramFilter) -> Result<(), TestCaseError> {
     let bel = f.belief();
@@ -157,7 +172,11 @@ fn run<E: Estimator>(
                     *n
                 };
                 (fix.x, fix.y, fix.std, fix.valid) = (*x, *y, *std, *valid);
-                est.correct(&beacons, &fix);
+                est.correct(&Readings {
+                    odom: &odom,
+                    beacons: Some(&beacons),
+                    fix: Some(&fix),
+                });
             }
         }
         est.write_particles(&mut particles);
@@ -182,6 +201,12 @@ proptest! {
             check_summary("bayes", f)?;
             check_belief(f)
         })?;
+        run(&mut EkfSlamEstimator::from_map(&map), &ops, |e| check_slam("ekf-slam", e))?;
+        run(&mut FastSlamEstimator::from_map(&map), &ops, |e| check_slam("fastslam", e))?;
+        let mut graph = GraphSlamEstimator::from_map(&map).expect("smoother thread starts");
+        run(&mut graph, &ops, |e| check_slam("graph-slam", e))?;
+        graph.settle();
+        check_slam("graph-slam settled", &graph)?;
     }
 }
 
@@ -247,6 +272,10 @@ fn absurd_odometry_is_ignored_by_every_estimator() {
     let mut bayes = coarse_histogram(&map);
     absurd_odometry_is_ignored("bayes", &mut bayes);
     check_belief(&bayes).unwrap_or_else(|e| panic!("{e}"));
+    absurd_odometry_is_ignored("ekf-slam", &mut EkfSlamEstimator::from_map(&map));
+    absurd_odometry_is_ignored("fastslam", &mut FastSlamEstimator::from_map(&map));
+    let mut graph = GraphSlamEstimator::from_map(&map).expect("smoother thread starts");
+    absurd_odometry_is_ignored("graph-slam", &mut graph);
 }
 
 #[test]

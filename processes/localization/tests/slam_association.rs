@@ -1,15 +1,18 @@
 //! Unknown correspondences: EKF-SLAM and FastSLAM associate readings by maximum likelihood
 //! inside a χ² gate without looking at the ids; the test, which knows the true ids, scores them.
+//! Through the libraries, and as the process runs them: readings whose id is
+//! `LANDMARK_ANONYMOUS`, as the sensing process sends when the scenario hides the ids.
 
 mod slam_sim;
 
 use mole_localization::slam::{
-    Association, Correspondence, EkfSlam, FastSlam, FastSlamConfig, SlamConfig,
+    Association, Correspondence, EkfSlam, FastSlam, FastSlamConfig, SlamConfig, SlamError,
 };
-use mole_types::{BeaconReading, Pose2};
+use mole_localization::{EkfSlamEstimator, Estimator, FastSlamEstimator, Readings};
+use mole_types::{BeaconReading, Beacons, LANDMARK_ANONYMOUS, Odom, Pose2};
 use nalgebra::Matrix3;
-use slam_sim::{DT, landmarks, simulate};
-use std::collections::BTreeSet;
+use slam_sim::{DT, landmarks, messages, simulate, world_map};
+use std::collections::{BTreeMap, BTreeSet};
 
 /// Steps per run: about one loop, so landmarks are met, left and met again.
 const STEPS: usize = 300;
@@ -137,4 +140,129 @@ fn fastslam_associates_readings_without_ids() {
     }
     println!("FastSLAM: {total:?}, error rate {:.4}", total.rate());
     assert!(total.rate() < MAX_ERROR_RATE, "{total:?}");
+}
+
+/// Scores the decisions of a step without ids: `founders` maps each landmark slot to the true
+/// id of the reading that founded it (a duplicate founding or a match to another beacon's
+/// slot is an error).
+fn score_anonymous(
+    truth: &[BeaconReading],
+    decisions: &[Result<Association, SlamError>],
+    founders: &mut BTreeMap<usize, u32>,
+    score: &mut Score,
+) {
+    for (reading, decision) in truth.iter().zip(decisions) {
+        match decision {
+            Ok(Association::Matched { slot, .. }) => {
+                score.decided += 1;
+                score.wrong += usize::from(founders.get(slot) != Some(&reading.id));
+            }
+            Ok(Association::New { slot, id }) => {
+                assert_eq!(*id, LANDMARK_ANONYMOUS);
+                score.decided += 1;
+                score.wrong += usize::from(founders.values().any(|&t| t == reading.id));
+                founders.insert(*slot, reading.id);
+            }
+            Ok(Association::Discarded) => score.discarded += 1,
+            Err(_) => {}
+        }
+    }
+}
+
+/// The decision without the id, which anonymous readings cannot carry.
+fn slot_decision(d: &Result<Association, SlamError>) -> Option<(bool, usize)> {
+    match d {
+        Ok(Association::Matched { slot, .. }) => Some((false, *slot)),
+        Ok(Association::New { slot, .. }) => Some((true, *slot)),
+        _ => None,
+    }
+}
+
+/// EKF-SLAM as the process runs it, with anonymous readings: every reading carries
+/// `LANDMARK_ANONYMOUS` and is associated by maximum likelihood or founds a landmark; scored
+/// with the true ids the test keeps, the error rate stays below the bound; the landmarks are
+/// published as anonymous.
+#[test]
+fn ekf_slam_estimator_associates_anonymous_readings() {
+    let mut odom: Odom = bytemuck::Zeroable::zeroed();
+    let mut beacons: Box<Beacons> = bytemuck::zeroed_box();
+    let mut score = Score::default();
+    for seed in 0..SEEDS {
+        let mut est = EkfSlamEstimator::from_map(&world_map(seed, &landmarks()));
+        let mut founders = BTreeMap::new();
+        for step in simulate(STEPS, seed) {
+            messages(&step, Some(LANDMARK_ANONYMOUS), &mut odom, &mut beacons);
+            est.step(&Readings {
+                odom: &odom,
+                beacons: Some(&beacons),
+                fix: None,
+            });
+            score_anonymous(&step.readings, est.decisions(), &mut founders, &mut score);
+        }
+        let mut out = bytemuck::zeroed_box::<mole_types::Landmarks>();
+        est.write_landmarks(&mut out);
+        assert_eq!(out.n_landmarks as usize, founders.len(), "seed {seed}");
+        assert!(out.landmarks().iter().all(|l| l.id == LANDMARK_ANONYMOUS));
+    }
+    println!(
+        "EKF-SLAM estimator, anonymous readings: {score:?}, error rate {:.4}",
+        score.rate()
+    );
+    assert!(
+        score.decided > 0 && score.rate() < MAX_ERROR_RATE,
+        "{score:?}"
+    );
+}
+
+/// FastSLAM as the process runs it, with anonymous readings, decides exactly as the library
+/// filter with unknown correspondences given the true ids as provenance (each particle keeps
+/// its own slots, so a slot names a landmark only within one particle, and only the
+/// provenance can score the most likely particle's decisions); scored that way the error rate
+/// stays below the bound.
+#[test]
+fn fastslam_estimator_associates_anonymous_readings() {
+    let mut odom: Odom = bytemuck::Zeroable::zeroed();
+    let mut beacons: Box<Beacons> = bytemuck::zeroed_box();
+    let mut score = Score::default();
+    for seed in 0..SEEDS {
+        let map = world_map(seed, &landmarks());
+        let mut est = FastSlamEstimator::from_map(&map);
+        let mut twin = FastSlam::new(
+            Pose2::default(),
+            slam_sim::noise(),
+            mole_localization::slam::SLAM_CAPACITY,
+            unknown(),
+            FastSlamConfig {
+                seed: map.seed,
+                ..FastSlamConfig::default()
+            },
+        );
+        let mut mapped = BTreeSet::new();
+        for step in simulate(STEPS, seed) {
+            messages(&step, Some(LANDMARK_ANONYMOUS), &mut odom, &mut beacons);
+            est.step(&Readings {
+                odom: &odom,
+                beacons: Some(&beacons),
+                fix: None,
+            });
+            twin.predict(step.v, step.omega, DT)
+                .expect("plausible control");
+            for (r, d) in step.readings.iter().zip(est.decisions()) {
+                let t = twin.correct_reading(r);
+                assert_eq!(slot_decision(d), slot_decision(&t), "seed {seed}");
+                if let Ok(a) = t {
+                    score.add(r, a, &mut mapped);
+                }
+            }
+            twin.finish_correction();
+        }
+    }
+    println!(
+        "FastSLAM estimator, anonymous readings: {score:?}, error rate {:.4}",
+        score.rate()
+    );
+    assert!(
+        score.decided > 0 && score.rate() < MAX_ERROR_RATE,
+        "{score:?}"
+    );
 }

@@ -125,8 +125,11 @@ fn corridor_belief_concentrates_on_the_true_cell() {
             range: dx.hypot(dy) + 0.05 * g(),
             bearing: wrap_angle(dy.atan2(dx) - theta + 0.02 * g()),
         };
-        f.predict(&odom);
-        f.correct(&beacons, &no_fix());
+        f.step(&Readings {
+            odom: &odom,
+            beacons: Some(&beacons),
+            fix: Some(&no_fix()),
+        });
         assert!((sum(&f) - 1.0).abs() < 1e-9, "Σ Bel = {}", sum(&f));
     }
     let (ix, iy, k) = f.argmax();
@@ -160,7 +163,7 @@ fn a_fix_pulls_the_belief_and_garbage_is_ignored() {
     fix.y = 2.0;
     fix.std = 0.1;
     let mut beacons: Box<Beacons> = bytemuck::zeroed_box();
-    assert_eq!(f.apply_correction(&beacons, &fix), 1);
+    assert_eq!(f.apply_correction(Some(&beacons), Some(&fix)), 1);
     let p = f.pose();
     assert!(
         (p.x - 7.0).abs() < 0.02 && (p.y - 2.0).abs() < 0.02,
@@ -182,10 +185,10 @@ fn a_fix_pulls_the_belief_and_garbage_is_ignored() {
         bearing: 0.0,
     };
     fix.valid = 3;
-    assert_eq!(f.apply_correction(&beacons, &fix), 0);
+    assert_eq!(f.apply_correction(Some(&beacons), Some(&fix)), 0);
     fix.valid = 1;
     fix.x = f64::INFINITY;
-    assert_eq!(f.apply_correction(&beacons, &fix), 0);
+    assert_eq!(f.apply_correction(Some(&beacons), Some(&fix)), 0);
     assert!(f.predict_with(f64::NAN, 0.0, 0.01).is_err());
     assert!(f.predict_with(0.0, 0.0, -1.0).is_err());
     assert_eq!(f.belief(), &before[..]);

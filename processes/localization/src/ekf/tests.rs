@@ -2,7 +2,7 @@ use super::*;
 use crate::test_support::zeroed_map;
 use approx::assert_relative_eq;
 use core::f64::consts::{FRAC_PI_4, PI};
-use mole_types::{EstimatorKind, Header, MAX_BEACONS, Pose};
+use mole_types::{Beacons, EstimatorKind, Header, MAX_BEACONS, Pose};
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -14,6 +14,16 @@ const BEACONS: [(f64, f64, u32); 4] = [
     (9.0, 9.0, 12),
     (1.0, 9.0, 13),
 ];
+
+/// The correction with this step's beacon readings and fix (both present), without a move.
+fn correct(ekf: &mut Ekf, beacons: &Beacons, fix: &Fix) {
+    let still: Odom = bytemuck::Zeroable::zeroed();
+    ekf.correct(&Readings {
+        odom: &still,
+        beacons: Some(beacons),
+        fix: Some(fix),
+    });
+}
 
 fn sites() -> Vec<BeaconSite> {
     BEACONS
@@ -148,7 +158,7 @@ fn correct_with_no_readings_and_invalid_fix_leaves_the_belief_alone() {
     let (mu, sigma) = (ekf.mu, ekf.sigma);
     let mut fix = no_fix();
     fix.x = 100.0; // ignored: valid == 0
-    ekf.correct(&empty_beacons(), &fix);
+    correct(&mut ekf, &empty_beacons(), &fix);
     assert_eq!((ekf.mu, ekf.sigma), (mu, sigma));
     assert_eq!((ekf.rejected(), ekf.ignored()), (0, 0));
 }
@@ -169,10 +179,10 @@ fn bad_readings_are_ignored_and_counted() {
     beacons.n_readings = bad.len() as u32;
     let mut fix = no_fix();
     fix.valid = 7; // unknown flag
-    ekf.correct(&beacons, &fix);
+    correct(&mut ekf, &beacons, &fix);
     fix.valid = 1;
     fix.x = f64::NAN;
-    ekf.correct(&empty_beacons(), &fix);
+    correct(&mut ekf, &empty_beacons(), &fix);
     ekf.predict(&Odom {
         header: Header::default(),
         v: f64::NAN,
@@ -191,7 +201,7 @@ fn bad_readings_are_ignored_and_counted() {
     // A count above capacity is counted and the in-capacity readings are still used.
     beacons.n_readings = MAX_BEACONS as u32 + 5;
     beacons.readings.fill(reading(99, 1.0, 0.0));
-    ekf.correct(&beacons, &no_fix());
+    correct(&mut ekf, &beacons, &no_fix());
     assert_eq!(ekf.ignored(), bad.len() as u64 + 4 + 1 + MAX_BEACONS as u64);
 }
 
@@ -375,8 +385,11 @@ fn simulate(seed: u64, ticks: usize) -> RunStats {
         fix.std = s.fix_std;
         readings += fix.valid as u64;
 
-        ekf.predict(&odom);
-        ekf.correct(&beacons, &fix);
+        ekf.step(&Readings {
+            odom: &odom,
+            beacons: Some(&beacons),
+            fix: Some(&fix),
+        });
 
         let mut e = truth - ekf.mu;
         e[2] = wrap_angle(e[2]);

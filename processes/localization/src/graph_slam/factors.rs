@@ -118,6 +118,28 @@ impl ObservationFactor {
     }
 }
 
+/// A position fix of one pose: z = (x, y) + δ, δ ~ N(0, σ²·I) (the linear reading of
+/// algorithms §6.5 as a unary factor).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionFactor {
+    /// Index of the pose.
+    pub pose: usize,
+    /// Measured position (m).
+    pub position: Vector2<f64>,
+    /// Ω = σ⁻²·I.
+    pub information: Matrix2<f64>,
+}
+
+impl PositionFactor {
+    /// ∂e/∂x = [I₂ 0]: the fix reads x and y, not θ.
+    pub const JACOBIAN: Matrix2x3<f64> = Matrix2x3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+
+    /// e = (x, y) of the pose − the fix.
+    pub fn residual(&self, pose: &Vector3<f64>) -> Vector2<f64> {
+        Vector2::new(pose[0] - self.position[0], pose[1] - self.position[1])
+    }
+}
+
 /// Ω = Q⁻¹ of one range-bearing reading (Thrun §11.2, Table 11.2 line 13).
 pub fn observation_information(noise: &NoiseModel) -> Matrix2<f64> {
     let q = noise.q_beacon();

@@ -11,25 +11,27 @@
 //!
 //! # Threading
 //!
-//! [`PoseGraph`] is `Send` and not meant to be shared: one background thread owns it. The
-//! front-end (the process main running a filter such as the EKF) keeps publishing a pose
-//! every step and hands each step's odometry and beacon readings to the owner through a
-//! bounded queue; the owner drains the queue with [`PoseGraph::add_pose`] and
-//! [`PoseGraph::add_observation`] (which do not allocate within the reserved capacity) and,
-//! between drains, calls [`PoseGraph::optimize`] with a small iteration budget so a solve never
-//! delays the queue for long. After a solve it sends the front-end a copy of what it needs
-//! (the newest smoothed pose and the landmark map), and the front-end re-anchors its filter on
-//! it and re-applies the odometry it received since. New poses are chained onto the latest
-//! optimised estimate, so every solve starts from a good initial guess.
+//! [`PoseGraph`] is `Send` and not meant to be shared: one thread owns it. In the process,
+//! [`GraphSlamEstimator`] (module `smoother`) runs an EKF-SLAM front-end on the step path and
+//! hands each step's odometry and associated readings through a bounded queue to a smoother
+//! thread that owns the graph, appends with [`PoseGraph::add_pose`] and
+//! [`PoseGraph::add_observation`] (which do not allocate within the reserved capacity) and
+//! solves with [`PoseGraph::optimize`] from the previous optimum, so every solve starts from a
+//! good initial guess.
 
 pub mod factors;
 mod normal_equations;
 mod problem;
+mod smoother;
+
+pub use smoother::{
+    GraphSlamEstimator, QUEUE_STEPS, SMOOTHER_POSES, SOLVE_EVERY, SOLVE_ITERATIONS,
+};
 
 use crate::models::MIN_RANGE;
 use crate::models::{MAX_ODOM_DT, MAX_ODOM_SPEED, MAX_ODOM_TURN_RATE};
 use crate::noise::NoiseModel;
-use factors::{ObservationFactor, OdometryFactor, observation_information};
+use factors::{ObservationFactor, OdometryFactor, PositionFactor, observation_information};
 use mole_types::{BeaconReading, Odom, Pose2, WorldMap, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use normal_equations::{NormalEquations, SolveError};
@@ -40,6 +42,9 @@ use thiserror::Error;
 pub const DEFAULT_PRIOR_STD: [f64; 3] = [1e-3, 1e-3, 1e-3];
 /// Default bound on a reading's range (m) beyond which it is refused as absurd.
 pub const DEFAULT_MAX_RANGE: f64 = 1000.0;
+/// Position fixes reserved: one per this many poses (a fix a second at 100 Hz); more grow the
+/// storage.
+const POSES_PER_RESERVED_FIX: usize = 100;
 
 /// Levenberg–Marquardt settings (Grisetti et al. 2010 §IV; Marquardt's diagonal scaling).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -217,6 +222,7 @@ impl PoseGraph {
             landmarks: Vec::with_capacity(capacity.landmarks),
             odometry: Vec::with_capacity(poses - 1),
             observations: Vec::with_capacity(capacity.observations),
+            positions: Vec::with_capacity(poses / POSES_PER_RESERVED_FIX + 1),
             prior: Vector3::new(start.x, start.y, wrap_angle(start.theta)),
             prior_information: Matrix3::from_diagonal(&Vector3::from(
                 config.prior_std.map(|s| 1.0 / (s * s)),
@@ -329,6 +335,46 @@ impl PoseGraph {
         });
         self.structure_changed = true;
         Ok(landmark)
+    }
+
+    /// Adds a position fix (x, y) of pose `pose_index` with σ `std` per coordinate (m; floored
+    /// as [`NoiseModel::q_fix`] does, the model's own σ when not positive): a unary factor that
+    /// ties the graph to the world frame, as the fix does the filters.
+    pub fn add_position(
+        &mut self,
+        pose_index: usize,
+        x: f64,
+        y: f64,
+        std: f64,
+    ) -> Result<(), GraphError> {
+        let result = self.try_add_position(pose_index, x, y, std);
+        if result.is_err() {
+            self.refused.readings += 1;
+        }
+        result
+    }
+
+    fn try_add_position(
+        &mut self,
+        pose_index: usize,
+        x: f64,
+        y: f64,
+        std: f64,
+    ) -> Result<(), GraphError> {
+        if !(x.is_finite() && y.is_finite()) {
+            return Err(GraphError::NotFinite("position"));
+        }
+        if pose_index >= self.problem.poses.len() {
+            return Err(GraphError::UnknownPose(pose_index));
+        }
+        let q = self.config.noise.q_fix(std);
+        self.problem.positions.push(PositionFactor {
+            pose: pose_index,
+            position: Vector2::new(x, y),
+            information: Matrix2::new(1.0 / q[(0, 0)], 0.0, 0.0, 1.0 / q[(1, 1)]),
+        });
+        // The pose's diagonal block is always in H: the structure did not change.
+        Ok(())
     }
 
     /// Runs at most `max_iterations` Levenberg–Marquardt iterations from the current estimate

@@ -15,7 +15,7 @@
 //! on the pattern only, so it is computed once per graph structure and reused by every LM
 //! iteration and every later call on the same structure.
 
-use super::factors::ObservationFactor;
+use super::factors::{ObservationFactor, PositionFactor};
 use super::problem::Problem;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
@@ -243,6 +243,11 @@ impl NormalEquations {
             };
             let cross = j_landmark.transpose() * omega * j_pose;
             self.add_below(3 * o.pose, next_pose + 2 * slot, &cross);
+        }
+        for p in &problem.positions {
+            let e = p.residual(&problem.poses[p.pose]);
+            chi2 += e.dot(&(p.information * e));
+            self.add_diagonal(3 * p.pose, &PositionFactor::JACOBIAN, &p.information, &e);
         }
         chi2
     }

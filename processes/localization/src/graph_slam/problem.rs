@@ -1,7 +1,7 @@
 //! The least-squares problem the graph stands for: the current estimate of every node, every
 //! factor, and the objective they define.
 
-use super::factors::{ObservationFactor, OdometryFactor, prior_residual};
+use super::factors::{ObservationFactor, OdometryFactor, PositionFactor, prior_residual};
 use mole_types::wrap_angle;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
@@ -16,6 +16,8 @@ pub struct Problem {
     pub odometry: Vec<OdometryFactor>,
     /// Every accepted range-bearing reading.
     pub observations: Vec<ObservationFactor>,
+    /// Every accepted position fix.
+    pub positions: Vec<PositionFactor>,
     /// Mean of the prior on the first pose.
     pub prior: Vector3<f64>,
     /// Information of the prior on the first pose.
@@ -38,6 +40,10 @@ impl Problem {
             if let Some(e) = o.residual(&self.poses[o.pose], &self.landmarks[o.landmark]) {
                 chi2 += e.dot(&(self.observation_information * e));
             }
+        }
+        for p in &self.positions {
+            let e = p.residual(&self.poses[p.pose]);
+            chi2 += e.dot(&(p.information * e));
         }
         chi2
     }

@@ -8,7 +8,7 @@ use super::{
 use crate::kalman::symmetrize;
 use crate::models::{odometry_is_plausible, unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v};
 use crate::noise::NoiseModel;
-use mole_types::{BeaconReading, Pose2, wrap_angle};
+use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, Pose2, wrap_angle};
 use nalgebra::{
     Cholesky, DMatrix, DVector, Matrix2, Matrix2x3, Matrix3, SMatrix, Vector2, Vector3,
 };
@@ -295,6 +295,9 @@ impl<M: MotionModel> EkfSlam<M> {
     fn try_correct_reading(&mut self, reading: &BeaconReading) -> Result<Association, SlamError> {
         let z = checked_reading(reading.range, reading.bearing, self.config.max_range)
             .ok_or(SlamError::Invalid)?;
+        if reading.id == LANDMARK_ANONYMOUS {
+            self.config.correspondence = Correspondence::Unknown;
+        }
         match self.config.correspondence {
             Correspondence::Known => match self.slots.get(reading.id) {
                 Some(slot) => {
@@ -534,7 +537,7 @@ impl<M: MotionModel> EkfSlam<M> {
     fn activate(&mut self, slot: usize, id: u32) {
         debug_assert_eq!(slot, self.n);
         self.ids.push(id);
-        if self.config.correspondence == Correspondence::Known {
+        if self.config.correspondence == Correspondence::Known && id != LANDMARK_ANONYMOUS {
             self.slots.insert(id, slot);
         }
         self.n += 1;
@@ -568,23 +571,54 @@ impl<M: MotionModel> EkfSlam<M> {
                         report.refused += 1;
                     }
                 }
-                (true, None) if self.n < self.capacity() => {
-                    let slot = self.n;
-                    let o = offset(slot);
-                    for c in 0..o {
-                        for k in 0..2 {
-                            self.sigma[(o + k, c)] = 0.0;
-                            self.sigma[(c, o + k)] = 0.0;
-                        }
-                    }
-                    self.set_landmark_block(o, &lm.mean, &lm.cov);
-                    self.activate(slot, lm.id);
-                    report.added += 1;
-                }
-                (true, None) => report.refused += 1,
+                (true, None) => match self.insert_landmark(lm) {
+                    Ok(_) => report.added += 1,
+                    Err(_) => report.refused += 1,
+                },
             }
         }
         report
+    }
+
+    /// Adds `landmark` as a new landmark with its mean and covariance, uncorrelated with the pose
+    /// and every other landmark, and returns its slot; refused when it is not finite and
+    /// positive definite or the map is full. Its id is not matched against the map's.
+    pub fn insert_landmark(&mut self, landmark: &Landmark) -> Result<usize, SlamError> {
+        let usable = landmark
+            .mean
+            .iter()
+            .chain(landmark.cov.iter())
+            .all(|v| v.is_finite())
+            && Cholesky::new(landmark.cov).is_some();
+        if !usable {
+            return Err(SlamError::Invalid);
+        }
+        if self.n == self.capacity() {
+            return Err(SlamError::MapFull);
+        }
+        let slot = self.n;
+        let o = offset(slot);
+        for c in 0..o {
+            for k in 0..2 {
+                self.sigma[(o + k, c)] = 0.0;
+                self.sigma[(c, o + k)] = 0.0;
+            }
+        }
+        self.set_landmark_block(o, &landmark.mean, &landmark.cov);
+        self.activate(slot, landmark.id);
+        Ok(slot)
+    }
+
+    /// Correction with a position fix z = (x, y) of covariance `q_t` (a linear reading of the
+    /// pose, H = [I₂ 0]; algorithms §6.5), refused beyond the outlier gate; refusals are
+    /// counted. Through the cross-covariances it moves the landmarks too.
+    pub fn correct_fix(&mut self, x: f64, y: f64, q_t: &Matrix2<f64>) -> Result<(), SlamError> {
+        let nu = Vector2::new(x - self.mu[0], y - self.mu[1]);
+        let h_x = Matrix2x3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+        // H has no landmark columns: zero blocks at offset 0 (the pose's own columns).
+        let result = self.update(&nu, &h_x, 0, &Matrix2::zeros(), q_t, self.gates.outlier);
+        self.tally.record_refusal(&result);
+        result
     }
 
     /// CI of landmark `slot` with `other` (see [`EkfSlam::fuse_landmarks`]); false if refused.

@@ -10,7 +10,7 @@ use crate::kalman::kalman_correct;
 use crate::models::{odometry_is_plausible, unicycle_g, wrap_near};
 use crate::noise::NoiseModel;
 use crate::pf::{low_variance_resample, normalise_log_weights};
-use mole_types::{BeaconReading, Pose2, wrap_angle};
+use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, Pose2, wrap_angle};
 use nalgebra::{Cholesky, Matrix2, Matrix3, Vector2, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -271,6 +271,79 @@ impl FastSlam {
         self.finish_correction();
     }
 
+    /// Weighs every particle by a position fix z = (x, y) of covariance `q_t`,
+    /// w ∝ N(z; (xⱼ, yⱼ), Q_t) (a linear reading of the pose, as the localising PF weighs it);
+    /// call [`FastSlam::finish_correction`] after it. A fix that is not finite or whose `q_t` is
+    /// not positive definite is ignored and counted.
+    pub fn weigh_fix(&mut self, x: f64, y: f64, q_t: &Matrix2<f64>) -> Result<(), SlamError> {
+        let chol = Cholesky::new(*q_t).filter(|_| x.is_finite() && y.is_finite());
+        let Some(chol) = chol else {
+            self.tally.ignored += 1;
+            return Err(SlamError::Invalid);
+        };
+        for (pose, log_w) in self.set.pose.iter().zip(self.log_w.iter_mut()) {
+            let e = Vector2::new(x - pose[0], y - pose[1]);
+            *log_w -= 0.5 * e.dot(&chol.solve(&e));
+        }
+        Ok(())
+    }
+
+    /// Adds `landmark` (mean, covariance) to every particle's map and returns its slot; its id
+    /// goes into the id table when correspondences are known and it is not anonymous. Refused
+    /// when it is not finite and positive definite, or a particle's map is full. Meant for a
+    /// filter that starts from another estimator's map (every particle has the same landmarks).
+    pub fn insert_landmark(&mut self, landmark: &Landmark) -> Result<usize, SlamError> {
+        let usable = landmark
+            .mean
+            .iter()
+            .chain(landmark.cov.iter())
+            .all(|v| v.is_finite())
+            && Cholesky::new(landmark.cov).is_some();
+        if !usable {
+            return Err(SlamError::Invalid);
+        }
+        let slot = self.set.count[0];
+        if self.set.count.iter().any(|&c| c != slot) || slot == self.capacity {
+            return Err(SlamError::MapFull);
+        }
+        if self.config.correspondence == Correspondence::Known
+            && landmark.id != LANDMARK_ANONYMOUS
+            && !self.slots.insert(landmark.id, slot)
+        {
+            return Err(SlamError::MapFull);
+        }
+        for j in 0..self.len() {
+            let i = j * self.capacity + slot;
+            self.set.lm_mean[i] = landmark.mean;
+            self.set.lm_cov[i] = landmark.cov;
+            self.set.lm_id[i] = landmark.id;
+            self.set.count[j] += 1;
+        }
+        Ok(slot)
+    }
+
+    /// Scatters the particles around their (common) start pose by N(0, Σ) with the filter's own
+    /// random stream, for a filter that starts from another estimator's uncertain pose; a Σ
+    /// that is not finite and positive semi-definite leaves them where they are.
+    pub fn scatter(&mut self, sigma: &Matrix3<f64>) {
+        let jittered = sigma + Matrix3::identity() * 1e-12;
+        let Some(chol) = Cholesky::new(jittered).filter(|_| sigma.iter().all(|v| v.is_finite()))
+        else {
+            return;
+        };
+        let l = chol.l();
+        for pose in self.set.pose.iter_mut() {
+            let n = Vector3::new(
+                gauss(&mut self.rng),
+                gauss(&mut self.rng),
+                gauss(&mut self.rng),
+            );
+            let d = l * n;
+            *pose = Vector3::new(pose[0] + d[0], pose[1] + d[1], wrap_angle(pose[2] + d[2]));
+        }
+        self.summarise();
+    }
+
     /// Ends a correction made reading by reading with [`FastSlam::correct_reading`]: normalises
     /// the weights, updates the estimate, and resamples when N_eff < threshold · M.
     pub fn finish_correction(&mut self) {
@@ -297,6 +370,9 @@ impl FastSlam {
             .ok_or(SlamError::Invalid)?;
         if z[0] < crate::models::MIN_RANGE {
             return Err(SlamError::TooClose);
+        }
+        if reading.id == LANDMARK_ANONYMOUS {
+            self.config.correspondence = Correspondence::Unknown;
         }
         let best = self.most_likely_particle();
         match self.config.correspondence {

@@ -9,7 +9,12 @@
 //! second, looser gate around every landmark (readings between the two gates are discarded, so
 //! an ambiguous reading never spawns a duplicate). A landmark founded that way keeps the id the
 //! founding reading carried, as provenance only, so a caller that knows the true ids can score
-//! the associations ([`Association`], [`AssociationStats`]).
+//! the associations ([`Association`], [`AssociationStats`]). A reading whose id is
+//! `mole_types::LANDMARK_ANONYMOUS` (a sensor that hides the ids) switches a filter to unknown
+//! correspondences for the rest of the run.
+//!
+//! [`EkfSlamEstimator`] and [`FastSlamEstimator`] run the two filters in the process, behind
+//! [`crate::Estimator`].
 //!
 //! Names follow Thrun et al.: R_t is the PROCESS noise covariance, Q_t the MEASUREMENT noise
 //! covariance. Everything is allocated in the constructors; a step allocates nothing. Odometry
@@ -18,10 +23,12 @@
 
 mod ci;
 mod ekf_slam;
+mod estimators;
 mod fastslam;
 
 pub use ci::{Fused, covariance_intersection};
 pub use ekf_slam::{EkfSlam, FuseReport, LandmarkInit, MotionModel, UnicycleMotion};
+pub use estimators::{EkfSlamEstimator, FastSlamEstimator, SLAM_CAPACITY, write_landmarks};
 pub use fastslam::{FastSlam, FastSlamConfig};
 
 use crate::kalman::KalmanError;
@@ -172,6 +179,15 @@ impl Tally {
     pub(crate) fn record(&mut self, outcome: &Result<Association, SlamError>) {
         match outcome {
             Ok(a) => self.stats.count(*a),
+            Err(e) if e.is_rejection() => self.rejected += 1,
+            Err(_) => self.ignored += 1,
+        }
+    }
+
+    /// Counts the refusal, if any, of an input that is not a beacon reading (a position fix).
+    pub(crate) fn record_refusal(&mut self, outcome: &Result<(), SlamError>) {
+        match outcome {
+            Ok(()) => {}
             Err(e) if e.is_rejection() => self.rejected += 1,
             Err(_) => self.ignored += 1,
         }

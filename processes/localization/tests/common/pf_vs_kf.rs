@@ -5,7 +5,7 @@
 
 use mole_localization::kf::KalmanFilter;
 use mole_localization::pf::{ParticleFilter, PfConfig};
-use mole_localization::{Estimator, NoiseModel};
+use mole_localization::{Estimator, NoiseModel, Readings};
 use mole_types::{Beacons, Fix, Odom, Pose2};
 use nalgebra::{Matrix2, Matrix2x1, Vector1, Vector2};
 use rand::SeedableRng;
@@ -69,8 +69,11 @@ pub fn compare(particles: usize, seeds: u64, steps: usize) -> Row {
             fix.x = tx + sf * g();
             fix.y = ty + sf * g();
             fix.std = sf;
-            pf.predict(&odom);
-            pf.correct(&beacons, &fix);
+            pf.step(&Readings {
+                odom: &odom,
+                beacons: Some(&beacons),
+                fix: Some(&fix),
+            });
             kf.predict(&Vector1::new(v)).expect("finite");
             kf.correct(&Vector2::new(fix.x, fix.y), None)
                 .expect("finite");

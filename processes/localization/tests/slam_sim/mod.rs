@@ -5,7 +5,7 @@
 
 use mole_localization::NoiseModel;
 use mole_localization::models::unicycle_g;
-use mole_types::{BeaconReading, wrap_angle};
+use mole_types::{BeaconReading, BeaconSite, Beacons, Odom, WorldMap, wrap_angle};
 use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -100,4 +100,40 @@ pub fn pose_error(est: mole_types::Pose2, truth: &Vector3<f64>) -> Vector3<f64> 
         est.y - truth[1],
         wrap_angle(est.theta - truth[2]),
     )
+}
+
+/// The `world/map` the process estimators are built from: start (0, 0, 0), the world's
+/// [`noise`], the seed, and `beacons` as the beacon sites (the SLAM estimators must not read
+/// them: pass scrambled ones to prove it).
+pub fn world_map(seed: u64, beacons: &[(f64, f64)]) -> Box<WorldMap> {
+    let mut m: Box<WorldMap> = bytemuck::zeroed_box();
+    let n = noise();
+    (m.arena_width, m.arena_height, m.dt, m.seed) = (30.0, 30.0, DT, seed);
+    let s = &mut m.sensors;
+    (s.odom_v_std, s.odom_omega_std) = (n.odom_v_std, n.odom_omega_std);
+    (s.beacon_range_std, s.beacon_bearing_std) = (n.beacon_range_std, n.beacon_bearing_std);
+    (s.beacon_range_max, s.fix_std) = (SENSOR_RANGE, n.fix_std);
+    for (i, &(x, y)) in beacons.iter().enumerate() {
+        m.beacons[i] = BeaconSite {
+            x,
+            y,
+            id: i as u32,
+            _pad: 0,
+        };
+    }
+    m.n_beacons = beacons.len() as u32;
+    m
+}
+
+/// The step's control and readings as the `sensing/odom` and `sensing/beacons` messages; ids
+/// replaced by `id` when given (e.g. `LANDMARK_ANONYMOUS`).
+pub fn messages(step: &Step, id: Option<u32>, odom: &mut Odom, beacons: &mut Beacons) {
+    (odom.v, odom.omega, odom.dt) = (step.v, step.omega, DT);
+    for (slot, r) in beacons.readings.iter_mut().zip(&step.readings) {
+        *slot = BeaconReading {
+            id: id.unwrap_or(r.id),
+            ..*r
+        };
+    }
+    beacons.n_readings = step.readings.len() as u32;
 }
