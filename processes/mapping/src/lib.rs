@@ -9,10 +9,12 @@
 pub mod contact;
 pub mod frontier;
 pub mod geometry;
+pub mod maps;
 
 pub use contact::{ContactGrid, estimate_contacts};
 pub use frontier::{FrontierGrid, LogOddsParams};
 pub use geometry::GridGeometry;
+pub use maps::Maps;
 
 /// Why a grid could not be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -7,19 +7,26 @@
 //! resolution. Per-message methods never allocate: every buffer is sized in [`Monitor::new`].
 
 mod render;
+mod slam;
 mod summary;
 mod track;
 mod truth;
 
-pub use summary::{LatencyUs, RunMeta, Summary, TopicSummary, UpdateUs, fnv1a64, write_summary};
+pub use slam::{CHI2_2_95, SlamSummary};
+pub use summary::{
+    LatencyUs, RunMeta, Summary, SwapRecord, TopicSummary, UpdateUs, fnv1a64, read_summary,
+    write_summary,
+};
 
 use hdrhistogram::Histogram;
 use mole_types::{
-    CELL_FREE, CELL_OCCUPIED, DIRECTION_SUBSCRIBE, EndReason, GRID_CONTACT, GRID_FRONTIER, Grid,
-    Invalid, MAX_PARTICLES, MAX_PATH, MAX_TOPIC_STATS, MODE_STALLED, Message, NAME_LEN, Particles,
-    PlanStatus, Pose, RunStatus, STATUS_EXPLORATION_COMPLETE, Square, Stats, TRUTH_GOAL_REACHED,
-    TRUTH_IN_CONTACT, TopicStats, Truth, WorldMap, read_name, wrap_angle,
+    BeaconSite, CELL_FREE, CELL_OCCUPIED, DIRECTION_SUBSCRIBE, EndReason, EstimatorKind,
+    GRID_CONTACT, GRID_FRONTIER, Grid, Invalid, Landmarks, MAX_PARTICLES, MAX_PATH,
+    MAX_TOPIC_STATS, MODE_STALLED, Message, NAME_LEN, Particles, PlanStatus, Pose, RunStatus,
+    STATUS_EXPLORATION_COMPLETE, Square, Stats, TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, TopicStats,
+    Truth, WorldMap, read_name, wrap_angle,
 };
+use slam::LandmarkMap;
 use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -110,6 +117,7 @@ pub(crate) struct Scene {
     pub goal: Option<(f64, f64)>,
     pub goal_tolerance: f64,
     pub squares: Vec<Square>,
+    pub beacons: Vec<BeaconSite>,
 }
 
 /// Coverage fractions whose first step the summary reports (`coverage_steps`).
@@ -175,6 +183,7 @@ pub struct Monitor {
     update_ns: Histogram<u64>,
 
     particles: Vec<[f32; 2]>,
+    landmarks: LandmarkMap,
 
     stats: Vec<ProcessStats>,
 
@@ -208,6 +217,7 @@ impl Monitor {
                 goal: (map.has_goal == 1).then_some((map.goal_x, map.goal_y)),
                 goal_tolerance: map.goal_tolerance,
                 squares: map.obstacles().to_vec(),
+                beacons: map.beacons().to_vec(),
             },
             raster,
             grid: LatestGrid {
@@ -245,6 +255,7 @@ impl Monitor {
             estimator: None,
             update_ns: hist()?,
             particles: Vec::with_capacity(MAX_PARTICLES),
+            landmarks: LandmarkMap::new(),
             stats: Vec::with_capacity(MAX_PROCESSES),
             plan_mode: 0,
             stalls: 0,
@@ -507,6 +518,23 @@ impl Monitor {
             .extend(p.particles().iter().map(|q| [q.x, q.y]));
     }
 
+    /// Keeps the latest landmark map of a SLAM estimator, scored at the end against the true
+    /// beacons and drawn with its 95% ellipses.
+    pub fn on_landmarks(&mut self, map: &Landmarks) {
+        self.landmarks.on_landmarks(map);
+    }
+
+    /// The SLAM section: the last landmark map scored against the true beacons; `None` unless
+    /// the estimator is a SLAM one or a landmark map arrived.
+    pub fn slam(&self) -> Option<SlamSummary> {
+        let slam_estimator = self
+            .estimator
+            .and_then(EstimatorKind::from_code)
+            .is_some_and(EstimatorKind::is_slam);
+        (slam_estimator || self.landmarks.received())
+            .then(|| self.landmarks.score(&self.scene.beacons))
+    }
+
     /// Keeps the latest counters of one process instance (by role and pid, so a restarted
     /// process's counters add to its predecessor's). Beyond [`MAX_PROCESSES`] instances the
     /// message is ignored and counted.
@@ -701,6 +729,11 @@ impl Monitor {
             pose_samples: self.pose_samples,
             nees_samples: self.nees_samples,
             ignored_messages: self.ignored_messages,
+            slam: self.slam(),
+            // The launcher's part: it fills these after the run.
+            hangs: BTreeMap::new(),
+            swaps: Vec::new(),
+            launcher_wall_time_s: None,
         }
     }
 
@@ -790,6 +823,9 @@ impl Monitor {
     pub(crate) fn particle_points(&self) -> &[[f32; 2]] {
         &self.particles
     }
+    pub(crate) fn landmark_estimates(&self) -> &[mole_types::Landmark] {
+        self.landmarks.landmarks()
+    }
     pub(crate) fn plan_points(&self) -> &[[f32; 2]] {
         &self.plan_path
     }
@@ -823,4 +859,26 @@ fn histogram_us(h: &Histogram<u64>) -> Vec<[f64; 2]> {
             ]
         })
         .collect()
+}
+
+impl RunMeta {
+    /// What the monitor knows of the run when it ends (the launcher adds restarts).
+    pub fn new(
+        planner: mole_types::PlannerKind,
+        estimator: mole_types::EstimatorKind,
+        mode: mole_types::ClockMode,
+        seed: u64,
+        wall_time: std::time::Duration,
+        exit_reason: &str,
+    ) -> RunMeta {
+        RunMeta {
+            planner: planner.to_string(),
+            estimator: estimator.to_string(),
+            mode: mode.to_string(),
+            seed,
+            wall_time_s: wall_time.as_secs_f64(),
+            exit_reason: exit_reason.to_owned(),
+            restarts: Default::default(),
+        }
+    }
 }

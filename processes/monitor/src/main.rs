@@ -5,10 +5,9 @@
 
 use clap::Parser;
 use mole_monitor::{Monitor, RunMeta, write_summary};
-use mole_runtime::{ClockMode, CommonArgs, Context, Wake, now_ns};
-use mole_types::{EndReason, topics};
-use std::collections::BTreeMap;
-use std::path::PathBuf;
+use mole_runtime::{ClockMode, CommonArgs, Flow, Process, now_ns};
+use mole_types::{EndReason, EstimatorKind, Message, PlannerKind, env, topics};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -25,128 +24,101 @@ struct Args {
     #[command(flatten)]
     common: CommonArgs,
     /// Where summary.json and map.png go.
-    #[arg(long, env = "MOLE_OUT", default_value = "runs/latest")]
+    #[arg(long, env = env::OUT, default_value = "runs/latest")]
     out: PathBuf,
-    /// The planner's name, for the summary.
-    #[arg(long, env = "MOLE_PLANNER", default_value = "random-walk")]
-    planner: String,
-    /// The estimator's name, for the summary.
-    #[arg(long, env = "MOLE_ESTIMATOR", default_value = "ekf")]
-    estimator: String,
+    #[arg(long, env = env::PLANNER, default_value_t = PlannerKind::RandomWalk)]
+    planner: PlannerKind,
+    #[arg(long, env = env::ESTIMATOR, default_value_t = EstimatorKind::Ekf)]
+    estimator: EstimatorKind,
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    mole_runtime::exit_code(run(&args))
-}
-
-fn end_reason(code: u32) -> &'static str {
-    EndReason::from_code(code).map_or("interrupted", EndReason::name)
+    mole_runtime::exit_code(run(&Args::parse()))
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let mut ctx = Context::new("monitor", &args.common)?;
-    let mut map_sub = ctx.subscriber(topics::WORLD_MAP)?;
-    let mut truth_sub = ctx.subscriber(topics::WORLD_TRUTH)?;
+    let mut p = Process::new("monitor", &args.common)?;
     // The truth and the frontier grid wake the monitor; the rest is read on those wake-ups.
-    let mut pose_sub = ctx.passive_subscriber(topics::LOCALIZATION_POSE)?;
-    let mut grid_sub = ctx.subscriber(topics::MAPPING_GRID)?;
-    let mut contact_sub = ctx.passive_subscriber(topics::MAPPING_CONTACT)?;
-    let mut particles_sub = ctx.passive_subscriber(topics::LOCALIZATION_PARTICLES)?;
-    let mut plan_sub = ctx.passive_subscriber(topics::PLANNING_STATUS)?;
-    let mut stats_sub = ctx.passive_subscriber(topics::STACK_STATS)?;
-    let mut status_pub = ctx.publisher(topics::MONITOR_STATUS)?;
-    let waitset = ctx.waitset()?;
-    let wakers = [map_sub.waker(), truth_sub.waker(), grid_sub.waker()];
-    let _attached = wakers
-        .iter()
-        .map(|w| waitset.attach(w))
-        .collect::<Result<Vec<_>, _>>()?;
-    ctx.ready();
+    let truth = p.observed(topics::WORLD_TRUTH, true)?;
+    let pose = p.observed(topics::LOCALIZATION_POSE, false)?;
+    let grid = p.observed(topics::MAPPING_GRID, true)?;
+    let contact = p.observed(topics::MAPPING_CONTACT, false)?;
+    let particles = p.observed(topics::LOCALIZATION_PARTICLES, false)?;
+    let landmarks = p.observed(topics::LOCALIZATION_LANDMARKS, false)?;
+    let plan = p.observed(topics::PLANNING_STATUS, false)?;
+    let stats = p.observed(topics::STACK_STATS, false)?;
+    let mut status_out = p.output(topics::MONITOR_STATUS)?;
+    let mode = p.context().mode();
+    let (mut end, mut end_seen, mut started) = (None::<u32>, None::<Instant>, None::<Instant>);
 
-    let mut monitor: Option<Monitor> = None;
-    let mut started: Option<Instant> = None;
-    let mut next_status = Instant::now() + STATUS_PERIOD;
-    let mut end: Option<u32> = None;
-    let mut end_seen: Option<Instant> = None;
-    loop {
-        let wake = waitset.wait(&mut ctx, Some(next_status))?;
-        if monitor.is_none()
-            && map_sub.update()
-            && let Some(map) = map_sub.latest()
-        {
-            monitor = Some(Monitor::new(map)?);
-            tracing::info!("map received");
-        }
-        let Some(m) = monitor.as_mut() else {
-            if wake == Wake::Shutdown {
-                return Ok(());
+    p.observe(
+        STATUS_PERIOD,
+        |start| Ok((Monitor::new(start.map)?, start.seed)),
+        |(m, seed), seen| {
+            // Truth first: every estimate, grid and status of a step derives from a truth in.
+            seen.drain(truth, |t| {
+                m.on_truth(t);
+                end = end.or(t.is_end().then_some(t.end_reason));
+            });
+            started.get_or_insert_with(Instant::now);
+            seen.drain(pose, |x| m.on_pose(x));
+            seen.drain(grid, |x| m.on_grid(x));
+            seen.drain(contact, |x| m.on_contact(x));
+            seen.drain(particles, |x| m.on_particles(x));
+            seen.drain(landmarks, |x| m.on_landmarks(x));
+            seen.drain(plan, |x| m.on_plan_status(x));
+            seen.drain(stats, |x| m.on_stats(x));
+            // Lockstep: the last step's estimate and grids were sent before the world's final
+            // step, but a publisher blocked on our full queue may still be delivering them:
+            // wait briefly, so the summary is the same on every run.
+            let last = tick(seen.latest(truth)).unwrap_or(0);
+            let outputs = [
+                tick(seen.latest(pose)),
+                tick(seen.latest(grid)),
+                tick(seen.latest(contact)),
+            ];
+            let behind = outputs.iter().any(|t| t.is_some_and(|t| t + 1 < last));
+            let draining = end.is_some() && mode == ClockMode::Lockstep && !seen.shutdown();
+            if draining
+                && behind
+                && end_seen.get_or_insert_with(Instant::now).elapsed() < LOCKSTEP_DRAIN
+            {
+                seen.again_in(Duration::from_millis(5));
+                return Ok(Flow::Continue);
             }
-            next_status = Instant::now() + STATUS_PERIOD;
-            continue;
-        };
-        // Truth first: every estimate, grid and status of a step was derived from a truth
-        // that is already in its queue.
-        truth_sub.drain(|t| {
-            m.on_truth(t);
-            if t.is_end() {
-                end = Some(t.end_reason);
+            let finished = end.is_some() || seen.shutdown();
+            if finished {
+                let reason = end
+                    .and_then(EndReason::from_code)
+                    .map_or("interrupted", EndReason::name);
+                let wall = started.map_or(Duration::ZERO, |s| s.elapsed());
+                write_files(
+                    m,
+                    &RunMeta::new(args.planner, args.estimator, mode, *seed, wall, reason),
+                    &args.out,
+                )?;
             }
-        });
-        started.get_or_insert_with(Instant::now);
-        pose_sub.drain(|p| m.on_pose(p));
-        grid_sub.drain(|g| m.on_grid(g));
-        contact_sub.drain(|g| m.on_contact(g));
-        particles_sub.drain(|p| m.on_particles(p));
-        plan_sub.drain(|s| m.on_plan_status(s));
-        stats_sub.drain(|s| m.on_stats(s));
+            if finished || seen.periodic() {
+                status_out.publish(last, now_ns(), |s| {
+                    m.write_status(s);
+                    s.finished = u32::from(finished);
+                })?;
+            }
+            Ok(if finished { Flow::End } else { Flow::Continue })
+        },
+    )
+}
 
-        // Lockstep: the last step's estimate and grids were sent before the world's final
-        // step, but a publisher blocked on our full queue may still be delivering them; wait
-        // for them (briefly) so the summary is the same on every run.
-        if let Some(last) = truth_sub.tick().filter(|_| end.is_some())
-            && ctx.mode() == ClockMode::Lockstep
-            && wake != Wake::Shutdown
-        {
-            let expected = last.saturating_sub(1);
-            let behind = [pose_sub.tick(), grid_sub.tick(), contact_sub.tick()]
-                .iter()
-                .any(|t| t.is_some_and(|t| t < expected));
-            let waited = end_seen.get_or_insert_with(Instant::now).elapsed();
-            if behind && waited < LOCKSTEP_DRAIN {
-                next_status = Instant::now() + Duration::from_millis(5);
-                continue;
-            }
-        }
-        let finished = end.is_some() || wake == Wake::Shutdown;
-        if finished || Instant::now() >= next_status {
-            next_status = Instant::now() + STATUS_PERIOD;
-            let tick = truth_sub.tick().unwrap_or(0);
-            if finished {
-                let reason = end.map_or("interrupted", end_reason);
-                let meta = RunMeta {
-                    planner: args.planner.clone(),
-                    estimator: args.estimator.clone(),
-                    mode: ctx.mode().to_string(),
-                    seed: map_sub
-                        .latest()
-                        .map_or(0, |map| ctx.seed().unwrap_or(map.seed)),
-                    wall_time_s: started.map_or(0.0, |s| s.elapsed().as_secs_f64()),
-                    exit_reason: reason.to_string(),
-                    restarts: BTreeMap::new(),
-                };
-                std::fs::create_dir_all(&args.out)?;
-                write_summary(&m.summary(&meta), &args.out.join("summary.json"))?;
-                m.render_png(&args.out.join("map.png"))?;
-                tracing::info!(out = %args.out.display(), exit_reason = reason, "summary written");
-            }
-            status_pub.publish(tick, now_ns(), |s| {
-                m.write_status(s);
-                s.finished = u32::from(finished);
-            })?;
-            if finished {
-                return Ok(());
-            }
-        }
-    }
+/// The tick of a message, if there is one.
+fn tick<M: Message>(message: Option<&M>) -> Option<u64> {
+    message.map(|m| m.header().tick)
+}
+
+/// summary.json and map.png, at the end of the run.
+fn write_files(m: &Monitor, meta: &RunMeta, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    std::fs::create_dir_all(out)?;
+    write_summary(&m.summary(meta), &out.join("summary.json"))?;
+    m.render_png(&out.join("map.png"))?;
+    tracing::info!(out = %out.display(), exit_reason = meta.exit_reason, "summary written");
+    Ok(())
 }

@@ -1,6 +1,7 @@
 //! map.png: the run in one picture, drawn into an RGB buffer (y up) with a built-in 5×7 bitmap
 //! font for the legend, so no font file is needed.
 
+use crate::slam::confidence_ellipse;
 use crate::{Monitor, Scene};
 use mole_types::{CELL_FREE, CELL_OCCUPIED};
 
@@ -19,9 +20,11 @@ pub(crate) const TRUE_TRACK: Rgb = [20, 170, 40];
 pub(crate) const EST_TRACK: Rgb = [255, 140, 0];
 pub(crate) const START: Rgb = [0, 200, 200];
 pub(crate) const GOAL: Rgb = [230, 0, 230];
+pub(crate) const BEACON: Rgb = [0, 110, 110];
+pub(crate) const LANDMARK: Rgb = [200, 20, 90];
 
 /// Legend entries, in the order drawn.
-pub(crate) const LEGEND: [(Rgb, &str); 11] = [
+pub(crate) const LEGEND: [(Rgb, &str); 13] = [
     (UNEXPLORED, "UNEXPLORED"),
     (FREE, "FREE"),
     (OCCUPIED, "OCCUPIED"),
@@ -33,6 +36,8 @@ pub(crate) const LEGEND: [(Rgb, &str); 11] = [
     (PARTICLE, "PARTICLES"),
     (START, "START"),
     (GOAL, "GOAL"),
+    (BEACON, "TRUE BEACON"),
+    (LANDMARK, "LANDMARK, 95% ELLIPSE"),
 ];
 
 const MARGIN: usize = 20;
@@ -250,6 +255,17 @@ pub(crate) fn draw(m: &Monitor) -> Canvas {
     polyline(&mut cv, &l, m.plan_points().iter().copied(), 2, PLAN);
     polyline(&mut cv, &l, m.true_points(), 2, TRUE_TRACK);
     polyline(&mut cv, &l, m.estimated_points(), 2, EST_TRACK);
+    for b in &scene.beacons {
+        let (x, y) = l.to_px(b.x, b.y);
+        cv.fill_rect(x - 5, y - 5, 11, 11, TEXT);
+        cv.fill_rect(x - 4, y - 4, 9, 9, BEACON);
+    }
+    for lm in m.landmark_estimates() {
+        if let Some(e) = confidence_ellipse(&lm.covariance) {
+            polyline(&mut cv, &l, ellipse_points(lm.x, lm.y, &e), 2, LANDMARK);
+        }
+        cv.disc(l.to_px(lm.x, lm.y), 3, LANDMARK);
+    }
     cv.disc(l.to_px(scene.start.0, scene.start.1), 7, TEXT);
     cv.disc(l.to_px(scene.start.0, scene.start.1), 5, START);
     if let Some((gx, gy)) = scene.goal {
@@ -281,6 +297,22 @@ pub(crate) fn draw(m: &Monitor) -> Canvas {
         ly += ROW_H as i64;
     }
     cv
+}
+
+/// Segments of a drawn ellipse.
+const ELLIPSE_SEGMENTS: usize = 48;
+
+/// The closed outline of an ellipse centred on (x, y), in world points.
+fn ellipse_points(x: f64, y: f64, e: &crate::slam::Ellipse) -> impl Iterator<Item = [f32; 2]> + '_ {
+    let (sin, cos) = e.angle.sin_cos();
+    (0..=ELLIPSE_SEGMENTS).map(move |k| {
+        let t = std::f64::consts::TAU * k as f64 / ELLIPSE_SEGMENTS as f64;
+        let (u, v) = (e.major * t.cos(), e.minor * t.sin());
+        [
+            (x + cos * u - sin * v) as f32,
+            (y + sin * u + cos * v) as f32,
+        ]
+    })
 }
 
 /// Joins consecutive world points with line segments.

@@ -1,5 +1,7 @@
 //! summary.json: the run's outcome in one file (the fields README.md lists, which users and
-//! tests rely on), with a fixed field order so two runs diff cleanly.
+//! tests rely on), with a fixed field order so two runs diff cleanly. One schema for its three
+//! users: the monitor writes it, the launcher reads it, fills its own part (restarts, hangs,
+//! swaps, why the run ended, its wall time) and writes it back, the tests read it.
 
 use crate::MonitorError;
 use serde::{Deserialize, Serialize};
@@ -109,6 +111,53 @@ pub struct Summary {
     pub nees_samples: u64,
     /// Grids refused for their size, resolution, origin or kind, and stats beyond capacity.
     pub ignored_messages: u64,
+    /// A SLAM estimator's landmark map against the true beacons (`null` for the others).
+    #[serde(default)]
+    pub slam: Option<crate::SlamSummary>,
+    /// The launcher's part: processes found hung (alive, silent for 5 s), per role.
+    #[serde(default)]
+    pub hangs: BTreeMap<String, u32>,
+    /// The launcher's part: every `mole swap` done during the run, in order.
+    #[serde(default)]
+    pub swaps: Vec<SwapRecord>,
+    /// The launcher's part: from its start to the end of the stack (`null` until it wrote it).
+    #[serde(default)]
+    pub launcher_wall_time_s: Option<f64>,
+}
+
+/// One `mole swap`: what the launcher measured while the new process took the role over.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SwapRecord {
+    pub role: String,
+    pub old_pid: u32,
+    pub pid: u32,
+    /// The world's tick when the old process was gone.
+    pub tick: u64,
+    /// The role's output whose silence is the gap.
+    pub topic: String,
+    /// Longest silence on `topic` during the swap.
+    pub gap_ms: f64,
+    /// Median interval on `topic` during the swap (its normal rhythm).
+    pub median_interval_ms: f64,
+    /// Distinct ticks seen on `topic` during the swap.
+    pub ticks_observed: u64,
+    /// Lockstep: steps missing from the truth or from `topic`.
+    pub steps_lost: u64,
+    /// Lockstep: steps a consumer handled twice.
+    pub steps_repeated: u64,
+    /// The old process ignored SIGTERM and was killed.
+    pub killed_old: bool,
+    /// From the request to the end of the watch.
+    pub duration_s: f64,
+}
+
+/// Reads a summary.json back (the launcher's and the tests' way in).
+pub fn read_summary(path: &Path) -> Result<Summary, MonitorError> {
+    let text = std::fs::read_to_string(path).map_err(|source| MonitorError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(serde_json::from_str(&text)?)
 }
 
 /// Writes the summary as pretty JSON (with a final newline).

@@ -3,7 +3,8 @@
 use super::*;
 use approx::assert_relative_eq;
 use mole_types::{
-    DIRECTION_PUBLISH, GRID_CONTACT, GRID_FRONTIER, Header, MAX_GRID_CELLS, TRUTH_END, write_name,
+    DIRECTION_PUBLISH, GRID_CONTACT, GRID_FRONTIER, Header, LANDMARK_ANONYMOUS, MAX_GRID_CELLS,
+    TRUTH_END, write_name,
 };
 use proptest::prelude::*;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -789,6 +790,8 @@ fn per_message_methods_do_not_allocate_in_steady_state() {
     particles.n_particles = mole_types::MAX_PARTICLES as u32;
     let mut plan: Box<PlanStatus> = bytemuck::zeroed_box();
     plan.n_path = mole_types::MAX_PATH as u32;
+    let mut landmarks: Box<Landmarks> = bytemuck::zeroed_box();
+    landmarks.n_landmarks = mole_types::MAX_LANDMARKS as u32;
     let st = stats(
         "mapping",
         3,
@@ -815,6 +818,7 @@ fn per_message_methods_do_not_allocate_in_steady_state() {
             m.on_contact(&c);
             m.on_particles(&particles);
             m.on_plan_status(&plan);
+            m.on_landmarks(&landmarks);
             m.on_stats(&st);
             m.on_stats(&new_process);
             m.write_status(&mut status);
@@ -889,4 +893,206 @@ fn max_grid_cells_worlds_build_quickly() {
     // Everything but the squares' clearance zones and the edge band is reachable.
     let free = m.raster.flags.iter().filter(|f| *f & OCCUPIED == 0).count() as u64;
     assert!(m.reachable_free_cells() > free * 8 / 10 && m.reachable_free_cells() < free);
+}
+
+// ---------------------------------------------------------------------------------------------
+// SLAM: the landmark map against the true beacons
+// ---------------------------------------------------------------------------------------------
+
+/// The walled world with three beacons: b0 (1, 1), b1 (3, 1), b2 (2, 1.8).
+fn beacon_world() -> Box<WorldMap> {
+    let mut map = walled_world(0.1);
+    for (i, (x, y)) in [(1.0, 1.0), (3.0, 1.0), (2.0, 1.8)].into_iter().enumerate() {
+        map.beacons[i] = mole_types::BeaconSite {
+            x,
+            y,
+            id: i as u32,
+            _pad: 0,
+        };
+    }
+    map.n_beacons = 3;
+    map
+}
+
+/// A landmark map of `estimator` at `tick`: (id, x, y, diagonal of Σ) per landmark.
+fn landmark_map(
+    tick: u64,
+    estimator: EstimatorKind,
+    items: &[(u32, f64, f64, [f64; 2])],
+) -> Box<Landmarks> {
+    let mut map: Box<Landmarks> = bytemuck::zeroed_box();
+    map.header.tick = tick;
+    map.estimator = estimator.code();
+    map.n_landmarks = items.len() as u32;
+    for (slot, &(id, x, y, [sxx, syy])) in map.landmarks.iter_mut().zip(items) {
+        *slot = mole_types::Landmark {
+            id,
+            _pad: 0,
+            x,
+            y,
+            covariance: [sxx, 0.0, 0.0, syy],
+        };
+    }
+    map
+}
+
+/// χ²₂ 0.95 is −2 ln 0.05, the 2-D 95% radius the ellipses are drawn at.
+#[test]
+fn chi2_two_dof_95_quantile_is_minus_two_ln_005() {
+    assert_relative_eq!(CHI2_2_95, -2.0 * 0.05f64.ln(), max_relative = 1e-15);
+    assert_relative_eq!(CHI2_2_95, 5.991, epsilon = 5e-4);
+}
+
+/// The 95% ellipse's semi-axes are √(5.991·λ) along Σ's eigenvectors, for a diagonal and a
+/// rotated covariance; an indefinite or non-finite Σ has none.
+#[test]
+fn confidence_ellipse_axes_from_a_known_covariance() {
+    let e = slam::confidence_ellipse(&[4.0, 0.0, 0.0, 1.0]).unwrap();
+    assert_relative_eq!(e.major, 2.0 * CHI2_2_95.sqrt(), max_relative = 1e-12);
+    assert_relative_eq!(e.minor, CHI2_2_95.sqrt(), max_relative = 1e-12);
+    assert_relative_eq!(e.angle, 0.0);
+    // R(45°) diag(4, 1) Rᵀ = [[2.5, 1.5], [1.5, 2.5]].
+    let e = slam::confidence_ellipse(&[2.5, 1.5, 1.5, 2.5]).unwrap();
+    assert_relative_eq!(e.major, 2.0 * CHI2_2_95.sqrt(), max_relative = 1e-12);
+    assert_relative_eq!(e.minor, CHI2_2_95.sqrt(), max_relative = 1e-12);
+    assert_relative_eq!(e.angle, PI / 4.0, max_relative = 1e-12);
+    // Taller than wide: the major axis is vertical.
+    let e = slam::confidence_ellipse(&[1.0, 0.0, 0.0, 9.0]).unwrap();
+    assert_relative_eq!(e.major, 3.0 * CHI2_2_95.sqrt(), max_relative = 1e-12);
+    assert_relative_eq!(e.angle.abs(), PI / 2.0, max_relative = 1e-12);
+    assert_eq!(
+        slam::confidence_ellipse(&[1.0, 2.0, 2.0, 1.0]),
+        None,
+        "eigenvalue −1"
+    );
+    assert_eq!(slam::confidence_ellipse(&[f64::NAN, 0.0, 0.0, 1.0]), None);
+}
+
+/// Landmark RMSE, NEES and association errors of a hand-made map, worked out by hand: two
+/// landmarks by id, one anonymous matched to its nearest beacon, one anonymous matched to a beacon
+/// already claimed (an association error), one naming a beacon the world lacks (another).
+#[test]
+fn slam_section_scores_a_hand_made_map() {
+    let mut m = Monitor::new(&beacon_world()).unwrap();
+    m.on_landmarks(&landmark_map(
+        40,
+        EstimatorKind::EkfSlam,
+        &[
+            (0, 1.1, 1.0, [0.01, 0.01]),                  // e = (0.1, 0), NEES 1
+            (1, 3.0, 1.2, [0.01, 0.01]),                  // e = (0, 0.2), NEES 4
+            (LANDMARK_ANONYMOUS, 2.0, 1.5, [0.09, 0.09]), // nearest b2, e = (0, −0.3), NEES 1
+            (LANDMARK_ANONYMOUS, 1.0, 1.4, [0.0, 0.0]),   // nearest b0, taken; Σ not PD
+            (7, 0.5, 0.5, [0.01, 0.01]),                  // no beacon 7
+        ],
+    ));
+    let s = m.summary(&meta()).slam.expect("a landmark map arrived");
+    assert_eq!(s.tick, Some(40));
+    assert_eq!((s.landmarks, s.true_beacons, s.beacons_mapped), (5, 3, 3));
+    assert_eq!((s.anonymous_landmarks, s.association_errors), (2, 2));
+    // (0.1² + 0.2² + 0.3² + 0.4²) / 4 = 0.075.
+    assert_relative_eq!(
+        s.landmark_rmse_m.unwrap(),
+        0.075f64.sqrt(),
+        max_relative = 1e-12
+    );
+    assert_eq!(s.landmark_nees_samples, 3);
+    assert_relative_eq!(s.landmark_nees.unwrap(), 2.0, max_relative = 1e-12);
+    // χ²₆(0.025) = 1.2373 and χ²₆(0.975) = 14.4494 (tables), over n = 3.
+    let [lo, hi] = s.landmark_nees_interval.unwrap();
+    assert_relative_eq!(lo, 1.2373 / 3.0, max_relative = 1e-4);
+    assert_relative_eq!(hi, 14.4494 / 3.0, max_relative = 1e-4);
+}
+
+/// A later map replaces the earlier one, and a full-covariance NEES uses the off-diagonal.
+#[test]
+fn slam_section_scores_the_latest_map_with_its_full_covariance() {
+    let mut m = Monitor::new(&beacon_world()).unwrap();
+    m.on_landmarks(&landmark_map(
+        5,
+        EstimatorKind::FastSlam,
+        &[(0, 9.0, 9.0, [1.0, 1.0])],
+    ));
+    let mut map = landmark_map(6, EstimatorKind::FastSlam, &[(1, 3.1, 1.1, [2.0, 2.0])]);
+    map.landmarks[0].covariance = [2.0, 1.0, 1.0, 2.0];
+    m.on_landmarks(&map);
+    let s = m.slam().unwrap();
+    assert_eq!((s.tick, s.landmarks, s.association_errors), (Some(6), 1, 0));
+    assert_relative_eq!(
+        s.landmark_rmse_m.unwrap(),
+        0.02f64.sqrt(),
+        max_relative = 1e-12
+    );
+    // e = (0.1, 0.1), Σ⁻¹ = [[2, −1], [−1, 2]] / 3: eᵀΣ⁻¹e = 0.02 / 3.
+    assert_relative_eq!(s.landmark_nees.unwrap(), 0.02 / 3.0, max_relative = 1e-12);
+}
+
+/// The section is null for an ordinary estimator and present, with nothing scored, for a SLAM
+/// estimator whose map has not arrived.
+#[test]
+fn slam_section_is_null_without_a_slam_estimator() {
+    let mut m = Monitor::new(&beacon_world()).unwrap();
+    m.on_pose(&pose(1, 1.0, 1.0, 0.0, [0.1; 3]));
+    assert_eq!(m.summary(&meta()).slam, None);
+    let v = serde_json::to_value(m.summary(&meta())).unwrap();
+    assert!(v["slam"].is_null());
+    let mut p = pose(2, 1.0, 1.0, 0.0, [0.1; 3]);
+    p.estimator = EstimatorKind::GraphSlam.code();
+    m.on_pose(&p);
+    let s = m.summary(&meta()).slam.expect("a SLAM estimator");
+    assert_eq!((s.tick, s.landmarks, s.true_beacons), (None, 0, 3));
+    assert_eq!(
+        (s.landmark_rmse_m, s.landmark_nees, s.landmark_nees_interval),
+        (None, None, None)
+    );
+}
+
+/// map.png draws the true beacons and each landmark's 95% ellipse where they belong.
+#[test]
+fn render_png_draws_beacons_and_landmark_ellipses() {
+    let mut m = Monitor::new(&beacon_world()).unwrap();
+    // Σ = diag(0.25, 0.04) / 5.991: semi-axes 0.5 m along x and 0.2 m along y.
+    let (sxx, syy) = (0.25 / CHI2_2_95, 0.04 / CHI2_2_95);
+    m.on_landmarks(&landmark_map(
+        3,
+        EstimatorKind::EkfSlam,
+        &[(1, 2.4, 1.0, [sxx, syy])],
+    ));
+    let path = temp_path("slam_map.png");
+    m.render_png(&path).unwrap();
+    let file = std::io::BufReader::new(std::fs::File::open(&path).unwrap());
+    let mut reader = png::Decoder::new(file).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let _ = std::fs::remove_file(&path);
+    // 4 × 2 m at 200 px/m from (20, 20), y up; the colour at a pixel and whether `colour` is
+    // within a pixel of it (outlines are 2 px wide).
+    let at = |c: i64, r: i64| {
+        let i = 3 * (r as usize * info.width as usize + c as usize);
+        [buf[i], buf[i + 1], buf[i + 2]]
+    };
+    let to_px = |x: f64, y: f64| ((20.0 + x * 200.0) as i64, (20.0 + 400.0 - y * 200.0) as i64);
+    let px = |x: f64, y: f64| {
+        let (c, r) = to_px(x, y);
+        at(c, r)
+    };
+    let near = |x: f64, y: f64, colour: render::Rgb| {
+        let (c, r) = to_px(x, y);
+        (-1..=1).any(|dr| (-1..=1).any(|dc| at(c + dc, r + dr) == colour))
+    };
+    assert_eq!(px(1.0, 1.0), render::BEACON, "true beacon b0");
+    assert_eq!(px(2.0, 1.8), render::BEACON, "true beacon b2");
+    assert_eq!(px(2.4, 1.0), render::LANDMARK, "landmark mean");
+    assert!(
+        near(2.9, 1.0, render::LANDMARK),
+        "ellipse end of the major axis"
+    );
+    assert!(
+        near(2.4, 1.2, render::LANDMARK),
+        "ellipse end of the minor axis"
+    );
+    assert!(
+        near(2.4, 0.8, render::LANDMARK),
+        "ellipse end of the minor axis"
+    );
+    assert!(!near(2.75, 1.0, render::LANDMARK), "inside the ellipse");
 }

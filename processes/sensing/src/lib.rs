@@ -14,8 +14,9 @@ pub use tactile::{sensor_angle, split_between_sensors};
 
 use core::f64::consts::TAU;
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, Fix, Invalid, MAX_BEACONS, MAX_BEAMS, MAX_TACTILE, Message,
-    Odom, Scan, SensorSpec, Tactile, TactileReading, Truth, WorldMap, wrap_angle,
+    BeaconReading, BeaconSite, Beacons, Fix, Invalid, LANDMARK_ANONYMOUS, MAX_BEACONS, MAX_BEAMS,
+    MAX_TACTILE, Message, Odom, Scan, SensorSpec, Tactile, TactileReading, Truth, WorldMap,
+    wrap_angle,
 };
 use rand::RngExt;
 use rand::SeedableRng;
@@ -296,9 +297,11 @@ impl Sensing {
     /// Beacons: range and bearing (from the heading, wrapped to (−π, π]) to every beacon within
     /// `beacon_range_max` whose line of sight from the robot centre no square blocks, with
     /// Gaussian noise (σ = `beacon_range_std`, `beacon_bearing_std`); the range is clamped at 0.
-    /// `id` is the beacon's index in `WorldMap::beacons`.
+    /// `id` is the beacon's index in `WorldMap::beacons`, or `LANDMARK_ANONYMOUS` for every
+    /// reading when the scenario hides the ids (`sensors.beacons_anonymous`).
     pub fn beacons(&mut self, truth: &Truth, out: &mut Beacons) {
         let s = self.spec;
+        let anonymous = s.beacons_anonymous == 1;
         let mut n = 0;
         for (idx, b) in self.beacons.iter().enumerate().take(MAX_BEACONS) {
             // Two draws per beacon, seen or not, so the stream advances the same every step.
@@ -322,7 +325,11 @@ impl Sensing {
                 }
             }
             out.readings[n] = BeaconReading {
-                id: idx as u32,
+                id: if anonymous {
+                    LANDMARK_ANONYMOUS
+                } else {
+                    idx as u32
+                },
                 _pad: 0,
                 range: (d + noise_r).max(0.0),
                 bearing: wrap_angle(dy.atan2(dx) - truth.theta + noise_b),

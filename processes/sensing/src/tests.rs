@@ -473,6 +473,30 @@ fn beacons_behind_a_square_or_out_of_range_are_not_seen() {
     assert!(out.readings().iter().all(|b| b.id != 0));
 }
 
+/// With `beacons_anonymous` set, the same beacons are seen with the same ranges and bearings,
+/// but every reading's id is `LANDMARK_ANONYMOUS`; a switch value other than 0 or 1 is refused.
+#[test]
+fn anonymous_beacons_hide_their_ids() {
+    let t = truth(2.0, 5.0, PI);
+    let mut named: Box<Beacons> = bytemuck::zeroed_box();
+    sensing(&beacon_map()).beacons(&t, &mut named);
+    let mut m = beacon_map();
+    m.sensors.beacons_anonymous = 1;
+    let mut anonymous: Box<Beacons> = bytemuck::zeroed_box();
+    sensing(&m).beacons(&t, &mut anonymous);
+    assert_eq!(anonymous.validate(), Ok(()));
+    assert_eq!(anonymous.n_readings, 3);
+    for (a, b) in anonymous.readings().iter().zip(named.readings()) {
+        assert_eq!(a.id, mole_types::LANDMARK_ANONYMOUS);
+        assert_eq!((a.range, a.bearing), (b.range, b.bearing));
+    }
+    m.sensors.beacons_anonymous = 2;
+    assert_eq!(
+        Sensing::new(&m, 42).unwrap_err(),
+        SensingError::InvalidMap(Invalid::UnknownCode("sensors.beacons_anonymous"))
+    );
+}
+
 #[test]
 fn beacon_noise_keeps_ranges_non_negative_and_bearings_wrapped() {
     let mut m = beacon_map();

@@ -17,7 +17,8 @@
 //! [sensors.lidar]     beams = 180, range_max = 4.0, fov = 2π, range_std = 0.01  (beams = 0: none)
 //! [sensors.tactile]   count = 8, stiffness = 2000.0, force_std = 0.05
 //! [sensors.odometry]  v_std = 0.02, omega_std = 0.02
-//! [sensors.beacons]   range_max = 6.0, range_std = 0.05, bearing_std = 0.02
+//! [sensors.beacons]   range_max = 6.0, range_std = 0.05, bearing_std = 0.02,
+//!                     anonymous = false   (true: readings hide the beacon ids)
 //! [sensors.fix]       std = 0.3, period_ticks = 100   (period_ticks = 0: no fix)
 //! [map]       image = "maps/small.yaml"  # a ROS map_server YAML, relative to the scenario file
 //! ```
@@ -242,6 +243,7 @@ struct BeaconSensorSection {
     range_max: f64,
     range_std: f64,
     bearing_std: f64,
+    anonymous: bool,
 }
 
 impl Default for BeaconSensorSection {
@@ -250,6 +252,7 @@ impl Default for BeaconSensorSection {
             range_max: 6.0,
             range_std: 0.05,
             bearing_std: 0.02,
+            anonymous: false,
         }
     }
 }
@@ -404,7 +407,7 @@ impl Scenario {
                 beacon_bearing_std: s.beacons.bearing_std,
                 fix_std: s.fix.std,
                 fix_period_ticks: s.fix.period_ticks,
-                _pad: 0,
+                beacons_anonymous: u32::from(s.beacons.anonymous),
             },
         }
     }
@@ -465,7 +468,6 @@ impl Scenario {
         map.grid_resolution = self.grid_resolution;
         map.robot = self.robot;
         map.sensors = self.sensors;
-        map.sensors._pad = 0;
         let n_obstacles = self.obstacles.len().min(MAX_OBSTACLES);
         map.obstacles[..n_obstacles].copy_from_slice(&self.obstacles[..n_obstacles]);
         map.obstacles[n_obstacles..].fill(Square::default());
@@ -1236,6 +1238,27 @@ period_ticks = 0
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("/nonexistent/x.toml: cannot read"), "{e}");
+    }
+
+    /// `[sensors.beacons] anonymous` reaches the world map as 0 or 1; anything but a boolean is
+    /// refused with its line, field and what was expected.
+    #[test]
+    fn anonymous_beacons_switch_travels_in_the_world_map() {
+        let mut map: Box<WorldMap> = bytemuck::zeroed_box();
+        parse("").unwrap().write_world_map(&mut map);
+        assert_eq!(map.sensors.beacons_anonymous, 0, "ids shown by default");
+        let s = parse("[sensors.beacons]\nrange_max = 2.0\nanonymous = true\n").unwrap();
+        s.write_world_map(&mut map);
+        assert_eq!(map.sensors.beacons_anonymous, 1);
+        assert_eq!(mole_types::Message::validate(&*map), Ok(()));
+        for bad in ["\"yes\"", "1", "1.0"] {
+            let e = err(&format!("[sensors.beacons]\nanonymous = {bad}\n"));
+            assert!(
+                e.starts_with("scenarios/x.toml:2:13: field `sensors.beacons.anonymous`: ")
+                    && e.contains("expected a boolean"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

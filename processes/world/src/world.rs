@@ -11,8 +11,8 @@
 use crate::broadphase::BucketGrid;
 use crate::scenario::{Goal, Scenario};
 use mole_types::{
-    Contact, MAX_CONTACTS, Pose2, RobotSpec, Square, TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, Truth,
-    wrap_angle,
+    Contact, END_NONE, EndReason, MAX_CONTACTS, Pose2, RobotSpec, Square, TRUTH_END,
+    TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, Truth, wrap_angle,
 };
 
 /// A wall or square within this gap of the rim (m) counts as touching.
@@ -164,6 +164,18 @@ impl World {
     /// Fills the pose, velocities, penetration and contacts (deepest first, at most
     /// `MAX_CONTACTS`) and sets or clears `TRUTH_IN_CONTACT` and `TRUTH_GOAL_REACHED`; leaves
     /// `header`, `TRUTH_END`, `end_reason` and `cmd_latency_ns` to the caller.
+    /// Fills `world/truth` for a step: the state, the loop latency of the command that drove it,
+    /// and, on the last step, why the run ended.
+    pub fn write_step(&self, truth: &mut Truth, latency_ns: u64, end: Option<EndReason>) {
+        self.write_truth(truth);
+        truth.cmd_latency_ns = latency_ns;
+        truth.end_reason = end.map_or(END_NONE, EndReason::code);
+        truth.flags = match end {
+            Some(_) => truth.flags | TRUTH_END,
+            None => truth.flags & !TRUTH_END,
+        };
+    }
+
     pub fn write_truth(&self, truth: &mut Truth) {
         truth.x = self.pose.x;
         truth.y = self.pose.y;
