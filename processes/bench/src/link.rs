@@ -128,6 +128,7 @@ pub(crate) fn with_runtime<M: BenchMessage, T>(
         mode: ClockMode::Realtime,
         rate_hz: 100.0,
         seed: None,
+        takeover: false,
     };
     let mut ctx = Context::with_shutdown_flag(role, &args, Arc::new(AtomicBool::new(false)))?;
     let data_out = ports
