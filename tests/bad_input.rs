@@ -1,6 +1,7 @@
 //! Bad input never crashes anything and never passes silently: a clear one-line error, exit 2.
 
 use mole_integration_tests::*;
+use mole_types::{EstimatorKind, PlannerKind, Role};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
@@ -43,12 +44,24 @@ fn refused(mut command: Command) -> Output {
     child.wait_with_output().expect("collect mole up's output")
 }
 
-/// `mole up ARGS` in a namespace and output directory of its own, which must be refused.
+/// `mole up ARGS` in a namespace and output directory of its own, which must be refused before
+/// any process starts (a started process leaves its log).
 fn refused_up(test: &str, args: &[&str]) -> Output {
     let namespace = unique_namespace(test);
     let out = std::env::temp_dir().join(format!("mole-{namespace}"));
     let output = refused(mole_command(&namespace, &out, args));
+    let started: Vec<_> = std::fs::read_dir(out.join("logs"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|entry| entry.file_name())
+        .collect();
     let _ = std::fs::remove_dir_all(&out);
+    assert!(
+        started.is_empty(),
+        "{args:?} started {started:?}: {}",
+        stderr_of(&output)
+    );
     output
 }
 
@@ -134,6 +147,61 @@ fn a_malformed_scenario_names_file_line_field_and_what_was_expected() {
     assert_eq!(output.status.code(), Some(2), "{}", stderr_of(&output));
 }
 
+/// A planner or an estimator the stack does not have is refused before anything starts, exit
+/// 2, naming every valid choice.
+#[test]
+fn an_unknown_planner_or_estimator_is_refused_naming_the_choices() {
+    for (flag, name, choices) in [
+        ("--planner", "teleport", PlannerKind::NAMES),
+        ("--estimator", "oracle", EstimatorKind::NAMES),
+    ] {
+        let output = refused_up("bad-kind", &[flag, name]);
+        let err = stderr_of(&output);
+        assert_eq!(output.status.code(), Some(2), "{flag} {name}: {err}");
+        assert!(err.contains(name), "{err}");
+        assert!(
+            err.contains(&choices.join(", ")),
+            "names the choices: {err}"
+        );
+    }
+}
+
+/// A goal outside the arena or in an obstacle, or a goal-seeking planner without a goal, is
+/// refused before anything starts, exit 2, naming the goal and the bounds or the obstacle.
+#[test]
+fn a_goal_the_robot_cannot_reach_or_no_goal_is_refused() {
+    let dwa = PlannerKind::Dwa.name();
+    let output = refused_up("far-goal", &["--planner", dwa, "--goal", "500,500"]);
+    let err = stderr_of(&output);
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("goal (500, 500) is outside the arena") && err.contains("10 m × 10 m"),
+        "names the goal and the arena: {err}"
+    );
+
+    let boxed = write_temp(
+        "boxed.toml",
+        "name = \"boxed\"\nobstacles = [{ x = 5.0, y = 5.0, side = 1.0 }]\n",
+    );
+    let scenario = boxed.to_str().unwrap();
+    let args = ["--planner", dwa, "--scenario", scenario, "--goal", "5.4,5"];
+    let output = refused_up("boxed-goal", &args);
+    let _ = std::fs::remove_file(&boxed);
+    let err = stderr_of(&output);
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("goal (5.4, 5) is in an obstacle") && err.contains("side 1 m at (5, 5)"),
+        "names the goal and the obstacle: {err}"
+    );
+
+    // The default scenario has no goal of its own.
+    let apf = PlannerKind::Apf.name();
+    let output = refused_up("no-goal", &["--planner", apf]);
+    let err = stderr_of(&output);
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert!(err.contains(apf) && err.contains("--goal"), "{err}");
+}
+
 /// `--swap` with an unknown role, a missing program or no command is refused in one line.
 #[test]
 fn swap_errors_are_one_clear_line() {
@@ -141,7 +209,7 @@ fn swap_errors_are_one_clear_line() {
     let err = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(
-        err.contains("navigator") && err.contains("planning"),
+        err.contains("navigator") && err.contains(Role::Planning.name()),
         "names the role and the known ones: {err}"
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
@@ -160,7 +228,7 @@ fn swap_errors_are_one_clear_line() {
 fn a_namespace_in_use_is_refused() {
     let _serial = serial();
     let stack = Stack::start("ns-busy", &["--mode", "realtime", "--ticks", "100000"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     let out = std::env::temp_dir().join(format!("mole-{}-second", stack.namespace));
     let output = refused(mole_command(&stack.namespace, &out, &["--ticks", "10"]));
     let err = stderr_of(&output);

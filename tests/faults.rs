@@ -3,7 +3,7 @@
 
 use mole_integration_tests::*;
 use mole_runtime::{ClockMode, CommonArgs, Context, Publisher};
-use mole_types::{Message, topics};
+use mole_types::{EndReason, GRAPH, Message, Role, topics};
 use std::os::unix::process::CommandExt;
 use std::time::Duration;
 
@@ -36,7 +36,7 @@ fn spray<M: Message>(publisher: &mut Publisher<M>, garbage: &mut Garbage, count:
 fn random_bytes_on_every_topic_crash_nothing_and_are_counted() {
     let _serial = serial();
     let stack = Stack::start("rogue", &["--mode", "realtime", "--ticks", "700"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     let rogue = join_realtime_stack(&stack.namespace, "rogue");
     let mut garbage = Garbage(0x9E37_79B9_7F4A_7C15);
     let mut truth = rogue.publisher(topics::WORLD_TRUTH).unwrap();
@@ -92,18 +92,18 @@ fn random_bytes_on_every_topic_crash_nothing_and_are_counted() {
     let summary = summary(&keep);
     let _ = std::fs::remove_dir_all(&keep);
     assert!(output.status.success(), "{logs}");
-    assert_eq!(summary["exit_reason"], "ticks", "{summary:#}");
-    for (role, restarts) in summary["restarts"].as_object().expect("restarts") {
-        assert_eq!(restarts, 0, "{role} crashed:\n{logs}");
+    assert_eq!(summary.exit_reason, EndReason::Ticks.name(), "{summary:#?}");
+    for (role, restarts) in &summary.restarts {
+        assert_eq!(*restarts, 0, "{role} crashed:\n{logs}");
     }
     let uncounted: Vec<&str> = sprayed
         .into_iter()
-        .filter(|topic| summary["topics"][*topic]["invalid"].as_u64().unwrap_or(0) == 0)
+        .filter(|topic| summary.topics.get(*topic).is_none_or(|t| t.invalid == 0))
         .collect();
     assert!(
         uncounted.is_empty(),
-        "garbage was sprayed on every topic, yet none was counted invalid on {uncounted:?}: {:#}",
-        summary["topics"]
+        "garbage was sprayed on every topic, yet none was counted invalid on {uncounted:?}: {:#?}",
+        summary.topics
     );
 }
 
@@ -151,17 +151,18 @@ fn every_role_killed_in_turn_comes_back_once_and_the_run_completes_its_steps() {
         "kill-each",
         &["--mode", "realtime", "--ticks", &ticks.to_string()],
     );
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
-    let roles = ["sensing", "localization", "mapping", "planning", "monitor"];
-    for role in roles {
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
+    // Every role but the world, which its policy never restarts.
+    let roles = GRAPH.iter().filter(|r| r.role != Role::World);
+    for row in roles.clone() {
         std::thread::sleep(Duration::from_millis(1200));
-        let program = format!("mole-{role}");
-        let old = pid_of(&stack.namespace, &program).unwrap_or_else(|| panic!("{program} runs"));
+        let program = row.program;
+        let old = pid_of(&stack.namespace, program).unwrap_or_else(|| panic!("{program} runs"));
         signal(old, nix::sys::signal::Signal::SIGKILL);
         // Only against hanging: how fast it comes back is not what this test judges.
         wait_for_new_pid(
             &stack.namespace,
-            &program,
+            program,
             Some(old),
             Duration::from_secs(30),
             &stack.out,
@@ -174,10 +175,11 @@ fn every_role_killed_in_turn_comes_back_once_and_the_run_completes_its_steps() {
     let summary = summary(&keep);
     let _ = std::fs::remove_dir_all(&keep);
     assert!(output.status.success(), "{logs}");
-    assert_eq!(summary["exit_reason"], "ticks", "{summary:#}");
-    assert_eq!(summary["ticks"], ticks, "every step ran: {summary:#}");
-    for role in roles {
-        assert_eq!(summary["restarts"][role], 1, "{role}: {summary:#}");
+    assert_eq!(summary.exit_reason, EndReason::Ticks.name(), "{summary:#?}");
+    assert_eq!(summary.ticks, ticks, "every step ran: {summary:#?}");
+    for row in roles {
+        let role = row.role.name();
+        assert_eq!(summary.restarts.get(role), Some(&1), "{role}: {summary:#?}");
     }
 }
 
@@ -186,19 +188,19 @@ fn every_role_killed_in_turn_comes_back_once_and_the_run_completes_its_steps() {
 fn a_hung_process_is_detected_by_its_silence_and_restarted() {
     let _serial = serial();
     let stack = Stack::start("hang", &["--mode", "realtime", "--ticks", "100000"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(1000));
-    let frozen = pid_of(&stack.namespace, "mole-mapping").expect("mapping runs");
+    let frozen = pid_of(&stack.namespace, Role::Mapping.spec().program).expect("mapping runs");
     // Alive but doing nothing: SIGSTOP.
     signal(frozen, nix::sys::signal::Signal::SIGSTOP);
     wait_for_new_pid(
         &stack.namespace,
-        "mole-mapping",
+        Role::Mapping.spec().program,
         Some(frozen),
         Duration::from_secs(15),
         &stack.out,
     );
-    stack.wait_for_log("mapping", "restart 1", Duration::from_secs(5));
+    stack.wait_for_log(Role::Mapping.name(), "restart 1", Duration::from_secs(5));
     std::thread::sleep(Duration::from_millis(500));
     signal(stack.pid(), nix::sys::signal::Signal::SIGINT);
     let out = stack.out.clone();
@@ -211,19 +213,10 @@ fn a_hung_process_is_detected_by_its_silence_and_restarted() {
         launcher_log.contains("hung"),
         "the launcher reports the hang:\n{launcher_log}"
     );
-    assert_eq!(summary["hangs"]["mapping"], 1, "{summary:#}");
-    assert_eq!(summary["restarts"]["mapping"], 1, "{summary:#}");
+    let mapping = Role::Mapping.name();
+    assert_eq!(summary.hangs.get(mapping), Some(&1), "{summary:#?}");
+    assert_eq!(summary.restarts.get(mapping), Some(&1), "{summary:#?}");
 }
-
-/// The programs of the default stack, one per role.
-const PROGRAMS: [&str; 6] = [
-    "mole-world",
-    "mole-sensing",
-    "mole-localization",
-    "mole-mapping",
-    "mole-planning",
-    "mole-monitor",
-];
 
 /// A process's program name as the kernel keeps it, for messages.
 fn program_of(pid: u32) -> String {
@@ -238,10 +231,10 @@ fn a_killed_launcher_leaves_no_child_behind_and_a_new_stack_in_its_namespace_cle
     let _serial = serial();
     let before = shm_files();
     let stack = Stack::start("killall", &["--mode", "realtime", "--ticks", "100000"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(800));
     let namespace = stack.namespace.clone();
-    for program in PROGRAMS {
+    for program in GRAPH.iter().map(|r| r.program) {
         assert!(
             pid_of(&namespace, program).is_some(),
             "{program} runs before the kill\n{}",
@@ -276,7 +269,7 @@ fn a_killed_launcher_leaves_no_child_behind_and_a_new_stack_in_its_namespace_cle
         "{}\n{logs}",
         String::from_utf8_lossy(&output.stderr)
     );
-    assert_eq!(summary["exit_reason"], "ticks", "{summary:#}");
+    assert_eq!(summary.exit_reason, EndReason::Ticks.name(), "{summary:#?}");
     assert!(processes_of(&namespace).is_empty());
     assert_eq!(
         left_behind(&before),
@@ -300,7 +293,7 @@ fn the_stacks_shared_memory_belongs_to_its_user_alone() {
     let _serial = serial();
     let before = shm_files();
     let stack = Stack::start("owner", &["--mode", "realtime", "--ticks", "100000"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     let uid = nix::unistd::getuid().as_raw();
     // Shared memory and service records (iceoryx2's node directories are 0750, its default).
     let ours: Vec<String> = shm_files()
@@ -444,6 +437,7 @@ fn other_user_probe() {
             mode: ClockMode::Realtime,
             rate_hz: 100.0,
             seed: None,
+            takeover: false,
         };
         let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         Context::with_shutdown_flag("intruder", &args, shutdown)
@@ -514,10 +508,10 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
         "cycles",
         &[&launch_arg, "--mode", "realtime", "--ticks", "10000000"],
     );
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     let log = stack.out.join("logs").join("planning.log");
     let readies = || std::fs::read_to_string(&log).map_or(0, |t| t.matches(" ready ").count());
-    let mut pid = pid_of(&stack.namespace, "mole-planning").expect("planning runs");
+    let mut pid = pid_of(&stack.namespace, Role::Planning.spec().program).expect("planning runs");
     let (mut shm_at_10, mut fds_at_10) = (Vec::new(), 0);
     let wait_ready = |starts: usize| {
         let deadline = std::time::Instant::now() + Duration::from_secs(20);
@@ -543,7 +537,7 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
         signal(pid, nix::sys::signal::Signal::SIGKILL);
         pid = wait_for_new_pid(
             &stack.namespace,
-            "mole-planning",
+            Role::Planning.spec().program,
             Some(pid),
             Duration::from_secs(10),
             &stack.out,
@@ -576,9 +570,9 @@ fn a_killed_world_ends_the_run_as_failed_because_its_policy_never_restarts_it() 
     let _serial = serial();
     let before = shm_files();
     let stack = Stack::start("kill-world", &["--mode", "realtime", "--ticks", "100000"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(500));
-    let world = pid_of(&stack.namespace, "mole-world").expect("mole-world runs");
+    let world = pid_of(&stack.namespace, Role::World.spec().program).expect("mole-world runs");
     signal(world, nix::sys::signal::Signal::SIGKILL);
     let out = stack.out.clone();
     let keep = out.with_extension("kept");
@@ -591,7 +585,7 @@ fn a_killed_world_ends_the_run_as_failed_because_its_policy_never_restarts_it() 
         stderr.contains("`world` exited (signal 9") && stderr.contains("does not restart it"),
         "{stderr}"
     );
-    assert_eq!(summary["exit_reason"], "process_failed", "{summary:#}");
+    assert_eq!(summary.exit_reason, "process_failed", "{summary:#?}");
     let leftovers = left_behind(&before);
     assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
 }
@@ -615,34 +609,31 @@ fn a_stalled_lockstep_run_ends_with_a_report_instead_of_waiting_forever() {
         "stall",
         &[file.to_str().expect("utf-8 path"), "--ticks", "100000000"],
     );
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     // Past mapping's second statistics (one a second), so the report carries a real count.
     std::thread::sleep(Duration::from_millis(1500));
-    let frozen = pid_of(&stack.namespace, "mole-mapping").expect("mapping runs");
+    let frozen = pid_of(&stack.namespace, Role::Mapping.spec().program).expect("mapping runs");
     signal(frozen, nix::sys::signal::Signal::SIGSTOP);
     let output = stack.wait(Duration::from_secs(60));
     let _ = std::fs::remove_file(&file);
     let launcher_log = String::from_utf8_lossy(&output.stderr).into_owned();
     assert_eq!(output.status.code(), Some(1), "{launcher_log}");
     let steps = steps_per_process(&launcher_log);
-    let roles = [
-        "world",
-        "sensing",
-        "localization",
-        "mapping",
-        "planning",
-        "monitor",
-    ];
-    for role in roles {
+    for role in GRAPH.iter().map(|r| r.role.name()) {
         assert!(
             steps.contains_key(role),
             "the stall report names `{role}` with its step: {steps:?}\n{launcher_log}"
         );
     }
-    // The monitor observes and handles no step of its own; every process of the loop ran on.
-    for role in ["world", "sensing", "localization", "planning"] {
+    // Every other process of the loop ran on (the monitor is not in the loop).
+    let mapping = steps[Role::Mapping.name()];
+    let ran_on = GRAPH
+        .iter()
+        .filter(|r| r.in_loop && r.role != Role::Mapping)
+        .map(|r| r.role.name());
+    for role in ran_on {
         assert!(
-            steps["mapping"] < steps[role],
+            mapping < steps[role],
             "the frozen mapping is behind `{role}`: {steps:?}\n{launcher_log}"
         );
     }

@@ -4,9 +4,10 @@
 //! `contact_events`, the rising edges of the world's contact flag, shows what a planner avoided.)
 
 use mole_integration_tests::*;
+use mole_types::{EndReason, PlannerKind};
 use std::time::Duration;
 
-fn run(test: &str, args: &[&str]) -> serde_json::Value {
+fn run(test: &str, args: &[&str]) -> Summary {
     let _serial = serial();
     let stack = Stack::start(test, args);
     let out = stack.out.clone();
@@ -34,18 +35,18 @@ fn dwa_reaches_the_goal_in_the_cluttered_field_without_touching_anything() {
             "--seed",
             "1",
             "--planner",
-            "dwa",
+            PlannerKind::Dwa.name(),
             "--scenario",
             "scenarios/cluttered.toml",
             "--ticks",
             "9000",
         ],
     );
-    assert_eq!(s["goal_reached"], true, "{s:#}");
-    assert_eq!(s["exit_reason"], "goal_reached");
+    assert!(s.goal_reached, "{s:#?}");
+    assert_eq!(s.exit_reason, EndReason::GoalReached.name());
     // The world keeps any command within 1 mm of penetration; not touching at all is what
     // DWA's clearance is for (contact_events: rising edges of the world's contact flag).
-    assert_eq!(s["contact_events"].as_u64(), Some(0), "{s:#}");
+    assert_eq!(s.contact_events, 0, "{s:#?}");
 }
 
 /// Frontier exploration covers 95 % of the maze's reachable area without touching a wall.
@@ -59,18 +60,20 @@ fn frontier_exploration_covers_the_maze() {
             "--seed",
             "1",
             "--planner",
-            "frontier",
+            PlannerKind::Frontier.name(),
             "--scenario",
             "scenarios/maze.toml",
             "--ticks",
             "25000",
         ],
     );
-    let coverage = s["coverage"].as_f64().unwrap_or(0.0);
-    assert!(coverage >= 0.95, "coverage {coverage}: {s:#}");
-    assert!(s["coverage_steps"]["0.95"].as_u64().is_some(), "{s:#}");
+    assert!(s.coverage >= 0.95, "coverage {}: {s:#?}", s.coverage);
+    assert!(
+        s.coverage_steps.get("0.95").is_some_and(Option::is_some),
+        "{s:#?}"
+    );
     // Corridors 1 m wide, explored without touching a wall.
-    assert_eq!(s["contact_events"].as_u64(), Some(0), "{s:#}");
+    assert_eq!(s.contact_events, 0, "{s:#?}");
 }
 
 /// APF in the U-trap reports its local minimum, travels on, and never touches the trap.
@@ -84,22 +87,16 @@ fn apf_in_the_u_trap_reports_a_stall_and_does_not_spin_forever() {
             "--seed",
             "1",
             "--planner",
-            "apf",
+            PlannerKind::Apf.name(),
             "--scenario",
             "scenarios/u_trap.toml",
             "--ticks",
             "3000",
         ],
     );
-    assert!(
-        s["stalls"].as_u64().is_some_and(|n| n >= 1),
-        "the local minimum is reported: {s:#}"
-    );
+    assert!(s.stalls >= 1, "the local minimum is reported: {s:#?}");
     // Escaping means moving on: metres of travel, not a robot turning on the spot.
-    assert!(
-        s["path_length_m"].as_f64().is_some_and(|l| l > 3.0),
-        "{s:#}"
-    );
+    assert!(s.path_length_m > 3.0, "{s:#?}");
     // The obstacles' repulsion, escape bursts included, keeps the robot off the trap's walls.
-    assert_eq!(s["contact_events"].as_u64(), Some(0), "{s:#}");
+    assert_eq!(s.contact_events, 0, "{s:#?}");
 }

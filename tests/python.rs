@@ -5,7 +5,9 @@
 //! it).
 
 use mole_integration_tests::*;
-use mole_types::{DIRECTION_PUBLISH, DIRECTION_SUBSCRIBE, Stats, read_name, topics};
+use mole_types::{
+    DIRECTION_PUBLISH, DIRECTION_SUBSCRIBE, EndReason, Role, Stats, read_name, topics,
+};
 use std::collections::BTreeMap;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -65,18 +67,24 @@ fn python_or_skip(test: &str) -> Option<String> {
 
 /// `--swap planning=...` running the planner with `python`.
 fn swap(python: &str) -> String {
-    format!("planning='{python}' {PLANNER}")
+    format!("{}='{python}' {PLANNER}", Role::Planning)
+}
+
+/// The planning role's log of a run's output directory.
+fn planning_log(out: &std::path::Path) -> String {
+    let log = out.join("logs").join(format!("{}.log", Role::Planning));
+    std::fs::read_to_string(log).unwrap_or_default()
 }
 
 /// Runs a stack to its end; returns its summary and its logs (checked for success).
-fn run(test: &str, args: &[&str]) -> (serde_json::Value, String) {
+fn run(test: &str, args: &[&str]) -> (Summary, String) {
     let stack = Stack::start(test, args);
     let namespace = stack.namespace.clone();
     let keep = stack.out.with_extension("kept");
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
     let logs = logs(&keep);
     let summary = summary(&keep);
-    let planning_log = std::fs::read_to_string(keep.join("logs/planning.log")).unwrap_or_default();
+    let planning_log = planning_log(&keep);
     let _ = std::fs::remove_dir_all(&keep);
     assert!(
         output.status.success(),
@@ -85,12 +93,6 @@ fn run(test: &str, args: &[&str]) -> (serde_json::Value, String) {
     );
     assert!(processes_of(&namespace).is_empty(), "processes left behind");
     (summary, planning_log)
-}
-
-fn f64_of(summary: &serde_json::Value, field: &str) -> f64 {
-    summary[field]
-        .as_f64()
-        .unwrap_or_else(|| panic!("summary field `{field}` is not a number: {summary:#}"))
 }
 
 /// What the Python planner says when SIGTERM stopped it cleanly: `stopped after N steps`.
@@ -119,29 +121,33 @@ fn the_python_planner_drives_the_lockstep_stack_deterministically() {
     let (first, log) = run("py-a", &args);
     let (second, _) = run("py-b", &args);
 
-    assert_eq!(first["ticks"], 1500, "every step completed: {first:#}");
-    assert_eq!(first["exit_reason"], "ticks", "{first:#}");
-    assert!(
-        f64_of(&first, "path_length_m") > 2.0,
-        "the robot moved: {first:#}"
-    );
+    assert_eq!(first.ticks, 1500, "every step completed: {first:#?}");
+    assert_eq!(first.exit_reason, EndReason::Ticks.name(), "{first:#?}");
+    assert!(first.path_length_m > 2.0, "the robot moved: {first:#?}");
     // The world keeps any command within 1 mm of penetration; keeping off the walls is the
     // wanderer's own doing.
-    assert_eq!(first["contact_events"].as_u64(), Some(0), "{first:#}");
-    assert_eq!(first["restarts"]["planning"], 0, "{first:#}");
+    assert_eq!(first.contact_events, 0, "{first:#?}");
+    let planning = Role::Planning.name();
+    assert_eq!(first.restarts.get(planning), Some(&0), "{first:#?}");
     // The world measures the loop latency from the origin_ns the planner copied from the pose:
     // a planner that dropped it would show the machine's uptime here.
-    let p99 = first["loop_latency_us"]["p99"].as_f64().unwrap_or(f64::MAX);
-    assert!(p99 < 1e6, "loop latency p99 {p99} µs: {first:#}");
+    let p99 = first.loop_latency_us.p99.unwrap_or(f64::MAX);
+    assert!(p99 < 1e6, "loop latency p99 {p99} µs: {first:#?}");
     // One command per tick: the world steps only once the command of the step before arrived.
     let steps = steps_at_stop(&log).unwrap_or(0);
     assert!(
         steps >= 1500,
         "the planner stopped cleanly after {steps} steps:\n{log}"
     );
-    for field in ["path_length_m", "grid_hash", "contact_hash", "coverage"] {
-        assert_eq!(first[field], second[field], "same seed, same run: {field}");
-    }
+    let outcome = |s: &Summary| {
+        (
+            s.path_length_m,
+            s.grid_hash.clone(),
+            s.contact_hash.clone(),
+            s.coverage,
+        )
+    };
+    assert_eq!(outcome(&first), outcome(&second), "same seed, same run");
     assert_eq!(left_behind(&before), Vec::<String>::new(), "left behind");
 }
 
@@ -166,7 +172,7 @@ impl PlannerStats {
 
     /// Whether the planner has handled steps and published one command for each.
     fn commanding(&self) -> bool {
-        self.steps > 0 && self.published("planning/cmd") == self.steps
+        self.steps > 0 && self.published(topics::PLANNING_CMD.name) == self.steps
     }
 }
 
@@ -176,7 +182,10 @@ fn status_at_monitor(stats: &Stats) -> Option<(u64, u64)> {
     stats
         .topics()
         .iter()
-        .find(|t| t.direction == DIRECTION_SUBSCRIBE && read_name(&t.topic) == "planning/status")
+        .find(|t| {
+            t.direction == DIRECTION_SUBSCRIBE
+                && read_name(&t.topic) == topics::PLANNING_STATUS.name
+        })
         .map(|t| (t.count, t.invalid))
 }
 
@@ -197,7 +206,7 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
             "--mode", "realtime", "--ticks", "800", "--seed", "3", "--swap", &swap,
         ],
     );
-    stack.wait_for_log("planning", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::Planning.name(), "ready", Duration::from_secs(60));
     let observer = join_realtime_stack(&stack.namespace, "observer");
     let mut stats_sub = observer.subscriber(topics::STACK_STATS).expect("stats");
     // Watch until the planner has published one command per handled step, a second statistics
@@ -212,10 +221,10 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
     while !(seen.commanding() && samples >= 2 && received(at_monitor)) && Instant::now() < deadline
     {
         stats_sub.drain(|s| {
-            if read_name(&s.process) == "monitor" {
+            if read_name(&s.process) == Role::Monitor.name() {
                 at_monitor = status_at_monitor(s);
             }
-            if read_name(&s.process) == "planning" {
+            if read_name(&s.process) == Role::Planning.name() {
                 samples += 1;
                 seen.pid = s.pid;
                 seen.steps = s.steps;
@@ -244,7 +253,7 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
     );
     assert!(samples >= 2, "statistics once a second: {samples} in 30 s");
     assert!(
-        seen.published("planning/status") > 0,
+        seen.published(topics::PLANNING_STATUS.name) > 0,
         "the planner publishes planning/status: {seen:?}"
     );
     assert!(
@@ -276,7 +285,7 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
     let logs = logs(&keep);
     let summary = summary(&keep);
-    let planning_log = std::fs::read_to_string(keep.join("logs/planning.log")).unwrap_or_default();
+    let planning_log = planning_log(&keep);
     let _ = std::fs::remove_dir_all(&keep);
     assert!(
         output.status.success(),
@@ -284,7 +293,7 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
         String::from_utf8_lossy(&output.stderr)
     );
     assert!(processes_of(&namespace).is_empty(), "processes left behind");
-    assert_eq!(summary["ticks"], 800, "{summary:#}");
+    assert_eq!(summary.ticks, 800, "{summary:#?}");
     // The world steps every 10 ms with or without a new command, and the planner takes the
     // newest pose: it handles each tick at most once and, keeping up, nearly all of the run's
     // 801 (0 to 800; the world starts once the planner listens).
@@ -293,11 +302,35 @@ fn the_python_planner_reports_its_statistics_in_realtime() {
         (720..=801).contains(&steps),
         "the planner handled {steps} of the 801 ticks:\n{planning_log}"
     );
-    assert!(summary["hangs"].get("planning").is_none(), "{summary:#}");
-    assert_eq!(summary["restarts"]["planning"], 0, "{summary:#}");
-    assert!(
-        f64_of(&summary, "max_penetration_m") <= 0.001,
-        "{summary:#}"
-    );
+    let planning = Role::Planning.name();
+    assert!(!summary.hangs.contains_key(planning), "{summary:#?}");
+    assert_eq!(summary.restarts.get(planning), Some(&0), "{summary:#?}");
+    assert!(summary.max_penetration_m <= 0.001, "{summary:#?}");
     assert_eq!(left_behind(&before), Vec::<String>::new(), "left behind");
+}
+
+/// The Python runtime follows the Rust step rules: examples/python_planner/test_step_rules.py
+/// checks mole_runtime.py against step_rules.json, which mole-runtime's tests keep equal to
+/// what the Rust rules decide. Needs python3 only, not iceoryx2.
+#[test]
+fn the_python_runtime_follows_the_rust_step_rules() {
+    let test = "the_python_runtime_follows_the_rust_step_rules";
+    let unittest = Command::new("python3")
+        .args(["-B", "-m", "unittest", "discover"])
+        .args(["-s", "examples/python_planner", "-p", "test_*.py"])
+        .current_dir(workspace())
+        .output();
+    let output = match unittest {
+        Ok(output) => output,
+        Err(e) => return skip(test, &format!("no python3: {e}")),
+    };
+    let report = String::from_utf8_lossy(&output.stderr);
+    let ran: u32 = report
+        .lines()
+        .find_map(|l| l.strip_prefix("Ran ")?.split(' ').next()?.parse().ok())
+        .unwrap_or(0);
+    assert!(
+        output.status.success() && ran > 0,
+        "the Python step rules differ from the Rust ones ({ran} tests ran):\n{report}"
+    );
 }

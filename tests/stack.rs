@@ -2,13 +2,14 @@
 //! and a process killed mid-run.
 
 use mole_integration_tests::*;
+use mole_types::{ClockMode, EndReason, EstimatorKind, GRAPH, PlannerKind, Role, topics};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use std::time::Duration;
 
 const RUN_TIMEOUT: Duration = Duration::from_secs(240);
 
-fn lockstep_run(test: &str, ticks: u64, seed: u64) -> serde_json::Value {
+fn lockstep_run(test: &str, ticks: u64, seed: u64) -> Summary {
     let ticks = ticks.to_string();
     let seed = seed.to_string();
     let stack = Stack::start(
@@ -25,14 +26,14 @@ fn lockstep_run(test: &str, ticks: u64, seed: u64) -> serde_json::Value {
         output.1
     );
     assert!(processes_of(&namespace).is_empty(), "processes left behind");
-    output.2
+    output.2.expect("a summary")
 }
 
 /// Waits, and reads the summary and logs before the stack's directory is removed.
 fn stack_wait_keep(
     stack: Stack,
     out: &std::path::Path,
-) -> (std::process::Output, String, serde_json::Value) {
+) -> (std::process::Output, String, Option<Summary>) {
     let (output, logs, summary, _) = stack_wait_keep_world_log(stack, out);
     (output, logs, summary)
 }
@@ -41,16 +42,12 @@ fn stack_wait_keep(
 fn stack_wait_keep_world_log(
     stack: Stack,
     out: &std::path::Path,
-) -> (std::process::Output, String, serde_json::Value, String) {
+) -> (std::process::Output, String, Option<Summary>, String) {
     let keep = out.with_extension("kept");
     let _ = std::fs::remove_dir_all(&keep);
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
     let logs = logs(&keep);
-    let summary = if keep.join("summary.json").exists() {
-        summary(&keep)
-    } else {
-        serde_json::Value::Null
-    };
+    let summary = keep.join("summary.json").exists().then(|| summary(&keep));
     let world_log = std::fs::read_to_string(keep.join("logs/world.log")).unwrap_or_default();
     let _ = std::fs::remove_dir_all(&keep);
     (output, logs, summary, world_log)
@@ -83,10 +80,12 @@ fn stepping_span(world_log: &str) -> (String, String) {
     (stamp(" ready "), stamp("run complete"))
 }
 
-fn f64_of(summary: &serde_json::Value, field: &str) -> f64 {
-    summary[field]
-        .as_f64()
-        .unwrap_or_else(|| panic!("summary field `{field}` is not a number: {summary:#}"))
+/// A summary value that must be there and finite.
+fn finite(summary: &Summary, field: &str, value: Option<f64>) -> f64 {
+    match value {
+        Some(v) if v.is_finite() => v,
+        _ => panic!("summary field `{field}` is {value:?}: {summary:#?}"),
+    }
 }
 
 #[test]
@@ -96,58 +95,47 @@ fn lockstep_run_explores_without_penetrating_and_reports_every_field() {
     let short = lockstep_run("short", 300, 11);
     let long = lockstep_run("long", 3000, 11);
 
-    assert_eq!(long["ticks"], 3000, "{long:#}");
-    assert_eq!(long["mode"], "lockstep");
-    assert_eq!(long["exit_reason"], "ticks");
+    assert_eq!(long.ticks, 3000, "{long:#?}");
+    assert_eq!(long.mode, ClockMode::Lockstep.name());
+    assert_eq!(long.exit_reason, EndReason::Ticks.name());
+    assert!(long.path_length_m > 2.0, "the robot moved: {long:#?}");
+    assert!(long.max_penetration_m <= 0.001, "{long:#?}");
     assert!(
-        f64_of(&long, "path_length_m") > 2.0,
-        "the robot moved: {long:#}"
-    );
-    assert!(f64_of(&long, "max_penetration_m") <= 0.001, "{long:#}");
-    assert!(
-        f64_of(&long, "coverage") > f64_of(&short, "coverage") + 0.05,
+        long.coverage > short.coverage + 0.05,
         "coverage rises: {} then {}",
-        short["coverage"],
-        long["coverage"]
+        short.coverage,
+        long.coverage
     );
     // Contact precision is undefined (null) while the robot has touched nothing, which
     // bounce-back on lidar usually achieves; the dark-room test checks it.
-    let precision = &long["contact_map_precision"];
-    assert!(precision.is_null() || precision.as_f64().is_some_and(f64::is_finite));
-    for field in [
-        "ticks",
-        "sim_time_s",
-        "wall_time_s",
-        "seed",
-        "path_length_m",
-        "coverage",
-        "map_iou",
-        "localization_rmse_m",
-        "max_penetration_m",
+    assert!(long.contact_map_precision.is_none_or(f64::is_finite));
+    for (field, value) in [
+        ("sim_time_s", long.sim_time_s),
+        ("wall_time_s", long.wall_time_s),
+        ("path_length_m", long.path_length_m),
+        ("coverage", long.coverage),
+        ("max_penetration_m", long.max_penetration_m),
     ] {
-        let value = f64_of(&long, field);
-        assert!(value.is_finite(), "{field} = {value}");
+        finite(&long, field, Some(value));
     }
-    for field in ["planner", "estimator", "mode", "exit_reason"] {
-        assert!(long[field].is_string(), "{field}: {long:#}");
-    }
-    assert!(long["goal_reached"].is_boolean());
-    assert!(long.get("time_to_goal_s").is_some());
-    for p in ["p50", "p99", "max"] {
-        assert!(
-            long["loop_latency_us"][p]
-                .as_f64()
-                .is_some_and(f64::is_finite),
-            "loop_latency_us.{p}"
-        );
+    finite(&long, "map_iou", long.map_iou);
+    finite(&long, "localization_rmse_m", long.localization_rmse_m);
+    finite(&long, "launcher_wall_time_s", long.launcher_wall_time_s);
+    assert_eq!(long.planner, PlannerKind::RandomWalk.name());
+    assert_eq!(long.estimator, EstimatorKind::Ekf.name());
+    let latency = &long.loop_latency_us;
+    for (p, value) in [
+        ("p50", latency.p50),
+        ("p99", latency.p99),
+        ("max", latency.max),
+    ] {
+        finite(&long, p, value);
     }
     assert!(
-        long["topics"]
-            .as_object()
-            .is_some_and(|t| t.contains_key("world/truth")),
-        "{long:#}"
+        long.topics.contains_key(topics::WORLD_TRUTH.name),
+        "{long:#?}"
     );
-    assert!(long["restarts"].is_object());
+    assert!(long.restarts.values().all(|n| *n == 0), "{long:#?}");
     assert_eq!(
         left_behind(&before),
         Vec::<String>::new(),
@@ -157,20 +145,15 @@ fn lockstep_run_explores_without_penetrating_and_reports_every_field() {
 
 /// A lockstep summary without what differs from run to run (wall time, latencies, wall-clock
 /// rates): what the scenario and seed alone decide.
-fn deterministic(summary: &serde_json::Value) -> serde_json::Value {
-    let mut s = summary.clone();
-    if let Some(o) = s.as_object_mut() {
-        for key in [
-            "wall_time_s",
-            "launcher_wall_time_s",
-            "loop_latency_us",
-            "estimator_update_us",
-            "topics",
-        ] {
-            o.remove(key);
-        }
+fn deterministic(summary: &Summary) -> Summary {
+    Summary {
+        wall_time_s: 0.0,
+        launcher_wall_time_s: None,
+        loop_latency_us: Default::default(),
+        estimator_update_us: Default::default(),
+        topics: Default::default(),
+        ..summary.clone()
     }
-    s
 }
 
 #[test]
@@ -180,10 +163,10 @@ fn two_lockstep_runs_with_the_same_seed_are_identical() {
     let second = lockstep_run("det-b", 1500, 42);
     let other = lockstep_run("det-c", 1500, 43);
     assert_eq!(deterministic(&first), deterministic(&second));
-    assert_eq!(first["grid_hash"], second["grid_hash"]);
-    assert_eq!(first["contact_hash"], second["contact_hash"]);
+    assert_eq!(first.grid_hash, second.grid_hash);
+    assert_eq!(first.contact_hash, second.contact_hash);
     assert_ne!(
-        first["grid_hash"], other["grid_hash"],
+        first.grid_hash, other.grid_hash,
         "another seed gives another run"
     );
 }
@@ -193,7 +176,7 @@ fn ctrl_c_stops_everything_and_leaves_nothing_behind() {
     let _serial = serial();
     let before = shm_files();
     let stack = Stack::start("ctrlc", &["--mode", "realtime", "--ticks", "100000"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(1500));
     let namespace = stack.namespace.clone();
     // mole top attaches to the running stack and shows every process and topic.
@@ -204,7 +187,13 @@ fn ctrl_c_stops_everything_and_leaves_nothing_behind() {
         "{}",
         String::from_utf8_lossy(&top.stderr)
     );
-    for needle in ["world/truth", "sensing", "planning/cmd", "running"] {
+    let roles = GRAPH.iter().map(|r| r.role.name());
+    let needles = [
+        topics::WORLD_TRUTH.name,
+        topics::PLANNING_CMD.name,
+        "running",
+    ];
+    for needle in roles.chain(needles) {
         assert!(
             screen.contains(needle),
             "mole top shows {needle}:\n{screen}"
@@ -222,7 +211,8 @@ fn ctrl_c_stops_everything_and_leaves_nothing_behind() {
         processes_of(&namespace).is_empty(),
         "a child outlived the launcher"
     );
-    assert_eq!(summary["exit_reason"], "interrupted", "{summary:#}");
+    let summary = summary.expect("a summary");
+    assert_eq!(summary.exit_reason, "interrupted", "{summary:#?}");
     assert_eq!(
         left_behind(&before),
         Vec::<String>::new(),
@@ -234,22 +224,23 @@ fn ctrl_c_stops_everything_and_leaves_nothing_behind() {
 fn a_killed_process_is_restarted_and_the_run_completes() {
     let _serial = serial();
     let stack = Stack::start("restart", &["--mode", "realtime", "--ticks", "600"]);
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(1000));
+    let sensing = Role::Sensing.spec().program;
     let victim = processes_of(&stack.namespace)
         .into_iter()
         .find(|pid| {
-            std::fs::read_to_string(format!("/proc/{pid}/comm"))
-                .is_ok_and(|c| c.trim() == "mole-sensing")
+            std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim() == sensing)
         })
-        .expect("a running mole-sensing");
+        .expect("a running sensing process");
     kill(Pid::from_raw(victim as i32), Signal::SIGKILL).expect("SIGKILL sensing");
     let out = stack.out.clone();
     let (output, logs, summary) = stack_wait_keep(stack, &out);
     assert!(output.status.success(), "{logs}");
-    assert_eq!(summary["restarts"]["sensing"], 1, "{summary:#}");
-    assert_eq!(summary["exit_reason"], "ticks");
-    assert_eq!(summary["ticks"], 600);
+    let summary = summary.expect("a summary");
+    assert_eq!(summary.restarts[Role::Sensing.name()], 1, "{summary:#?}");
+    assert_eq!(summary.exit_reason, EndReason::Ticks.name());
+    assert_eq!(summary.ticks, 600);
 }
 
 #[test]
@@ -271,18 +262,23 @@ fn in_the_dark_room_touch_alone_builds_the_contact_grid() {
     let out = stack.out.clone();
     let (output, logs, summary) = stack_wait_keep(stack, &out);
     assert!(output.status.success(), "{logs}");
+    let summary = summary.expect("a summary");
     assert!(
-        summary["contact_events"].as_u64().is_some_and(|n| n > 0),
-        "the robot touched something: {summary:#}"
+        summary.contact_events > 0,
+        "the robot touched something: {summary:#?}"
     );
-    let precision = f64_of(&summary, "contact_map_precision");
+    let precision = finite(
+        &summary,
+        "contact_map_precision",
+        summary.contact_map_precision,
+    );
     assert!(
         precision >= 0.9,
         "contact cells lie on true obstacles: {precision}"
     );
     assert!(
-        f64_of(&summary, "coverage") > 0.02,
-        "the footprint alone explores: {summary:#}"
+        summary.coverage > 0.02,
+        "the footprint alone explores: {summary:#?}"
     );
 }
 
@@ -304,7 +300,7 @@ fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
             "--seed",
             seed,
             "--estimator",
-            "bayes",
+            EstimatorKind::Bayes.name(),
         ]
     };
     let alone = |test: &str, seed| {
@@ -312,11 +308,11 @@ fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
         let out = stack.out.clone();
         let (output, logs, summary) = stack_wait_keep(stack, &out);
         assert!(output.status.success(), "{test}: {logs}");
-        summary
+        summary.expect("a summary")
     };
     let (alone_a, alone_b) = (alone("alone-a", "5"), alone("alone-b", "6"));
     assert_ne!(
-        alone_a["grid_hash"], alone_b["grid_hash"],
+        alone_a.grid_hash, alone_b.grid_hash,
         "the two seeds give two different runs, so a crossed topic would show"
     );
 
@@ -328,25 +324,17 @@ fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
     let (output_b, logs_b, side_b, world_b) = stack_wait_keep_world_log(b, &out_b);
     assert!(output_a.status.success(), "{logs_a}");
     assert!(output_b.status.success(), "{logs_b}");
+    let (side_a, side_b) = (side_a.expect("a summary"), side_b.expect("a summary"));
     let (span_a, span_b) = (stepping_span(&world_a), stepping_span(&world_b));
     assert!(
         span_a.0 < span_b.1 && span_b.0 < span_a.1,
         "the two worlds stepped at the same time: a {span_a:?}, b {span_b:?}"
     );
     for (alone, side, name) in [(&alone_a, &side_a, "a"), (&alone_b, &side_b, "b")] {
-        assert_eq!(side["ticks"], 400, "{name}: {side:#}");
-        assert_eq!(side["grid_hash"], alone["grid_hash"], "{name}");
-        assert_eq!(side["contact_hash"], alone["contact_hash"], "{name}");
-        let (side, alone) = (deterministic(side), deterministic(alone));
-        let differing: Vec<String> = side
-            .as_object()
-            .into_iter()
-            .flatten()
-            .filter(|(field, value)| alone.get(field.as_str()) != Some(*value))
-            .map(|(field, value)| format!("{field}: {value}, alone {}", alone[field.as_str()]))
-            .collect();
-        assert!(differing.is_empty(), "{name}: {differing:#?}");
-        assert_eq!(side, alone, "{name}");
+        assert_eq!(side.ticks, 400, "{name}: {side:#?}");
+        assert_eq!(side.grid_hash, alone.grid_hash, "{name}");
+        assert_eq!(side.contact_hash, alone.contact_hash, "{name}");
+        assert_eq!(deterministic(side), deterministic(alone), "{name}");
     }
     assert!(processes_of(&namespace_a).is_empty() && processes_of(&namespace_b).is_empty());
     assert_eq!(left_behind(&before), Vec::<String>::new(), "left behind");
@@ -358,7 +346,12 @@ fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
 #[test]
 fn every_estimator_localizes_within_its_bound() {
     let _serial = serial();
-    for (estimator, bound) in [("ekf", 0.05), ("pf", 0.05), ("bayes", 0.08), ("kf", 0.12)] {
+    for (estimator, bound) in [
+        (EstimatorKind::Ekf, 0.05),
+        (EstimatorKind::Pf, 0.05),
+        (EstimatorKind::Bayes, 0.08),
+        (EstimatorKind::Kf, 0.12),
+    ] {
         let stack = Stack::start(
             &format!("est-{estimator}"),
             &[
@@ -369,32 +362,39 @@ fn every_estimator_localizes_within_its_bound() {
                 "--seed",
                 "3",
                 "--estimator",
-                estimator,
+                estimator.name(),
             ],
         );
         let out = stack.out.clone();
         let (output, logs, summary) = stack_wait_keep(stack, &out);
         assert!(output.status.success(), "{estimator}: {logs}");
-        assert_eq!(summary["estimator"], estimator);
-        let rmse = f64_of(&summary, "localization_rmse_m");
+        let summary = summary.expect("a summary");
+        assert_eq!(summary.estimator, estimator.name());
+        let rmse = finite(&summary, "localization_rmse_m", summary.localization_rmse_m);
         assert!(rmse < bound, "{estimator}: RMSE {rmse} m ≥ {bound} m");
-        assert!(f64_of(&summary, "mean_nees").is_finite(), "{estimator}");
+        finite(&summary, "mean_nees", summary.mean_nees);
     }
 }
 
+/// A process that refuses its input (here a swapped-in planner named wrongly, which the
+/// launcher cannot check) fails the run with exit 2, its own message shown, and is not retried.
 #[test]
 fn a_process_that_refuses_its_input_fails_the_run_with_exit_2_without_restarts() {
     let _serial = serial();
-    // dwa needs a goal; the default scenario has none.
+    let planning = Role::Planning.spec();
+    let swap = format!("{}={} --planner teleport", planning.role, planning.program);
     let stack = Stack::start(
-        "no-goal",
-        &["--mode", "lockstep", "--ticks", "100", "--planner", "dwa"],
+        "child-refuses",
+        &["--mode", "lockstep", "--ticks", "100", "--swap", &swap],
     );
     let out = stack.out.clone();
     let (output, logs, _) = stack_wait_keep(stack, &out);
     let err = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{err}\n{logs}");
-    assert!(err.contains("planning") && err.contains("--goal"), "{err}");
+    assert!(
+        err.contains(planning.role.name()) && err.contains("teleport"),
+        "{err}"
+    );
     assert!(
         !logs.contains("restart"),
         "bad input is not retried:\n{logs}"

@@ -4,6 +4,8 @@
 //! listing shows every topic with its type name.
 
 use mole_integration_tests::*;
+use mole_types::graph::Swap;
+use mole_types::{EndReason, EstimatorKind, GRAPH, PlannerKind, Role};
 use std::process::Output;
 use std::time::Duration;
 
@@ -21,6 +23,16 @@ fn text(output: &Output) -> String {
     )
 }
 
+/// Whether a role's log shows its replacement going on from its predecessor's step output.
+fn took_over(log: &str, role: Role) -> bool {
+    let topic = role
+        .spec()
+        .step_output
+        .expect("a swappable role has a step output");
+    log.lines()
+        .any(|line| line.contains("took over the last output") && line.contains(topic))
+}
+
 /// Lockstep swaps of every swappable role observe ticks and lose none, no consumer handles one
 /// twice, and refused or failed swaps leave the old process in its role.
 #[test]
@@ -32,39 +44,46 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
         "swap-lockstep",
         &["--mode", "lockstep", "--ticks", "10000000"],
     );
-    stack.wait_for_log("world", "ready", Duration::from_secs(60));
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     let ns = stack.namespace.clone();
+    let (world, planning) = (Role::World.spec(), Role::Planning.spec());
+    let Swap::Refused(why) = world.swap else {
+        panic!("the graph lets the world be swapped");
+    };
 
     // Refusals: exit 2, one line naming what was wrong.
     for (args, needle) in [
+        (&[world.role.name(), world.program][..], why),
         (
-            &["world", "mole-world"][..],
-            "cannot be swapped while it runs",
-        ),
-        (
-            &["planer", "mole-planning"][..],
+            &["planer", planning.program][..],
             "no process has the role `planer`",
         ),
-        (&["planning", "./no/such/program"][..], "not found"),
+        (
+            &[planning.role.name(), "./no/such/program"][..],
+            "not found",
+        ),
     ] {
         let out = mole_swap(&ns, args);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {}", text(&out));
         assert!(text(&out).contains(needle), "{args:?}: {}", text(&out));
     }
     // A replacement that dies while starting: exit 1, and the old process keeps the role.
-    let out = mole_swap(&ns, &["planning", "/bin/false"]);
+    let out = mole_swap(&ns, &[planning.role.name(), "/bin/false"]);
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     assert!(text(&out).contains("keeps running"), "{}", text(&out));
 
     // Real swaps of every swappable role, quoted commands and words. Mapping and
     // localization take over their predecessor's grids and estimate.
-    for args in [
-        &["planning", "mole-planning --planner random-walk"][..],
-        &["sensing", "mole-sensing"][..],
-        &["mapping", "mole-mapping"][..],
-        &["localization", "mole-localization --estimator pf"][..],
-    ] {
-        let out = mole_swap(&ns, args);
+    let swappable: Vec<_> = GRAPH.iter().filter(|r| r.swap == Swap::Allowed).collect();
+    for row in &swappable {
+        let options = match row.role {
+            Role::Planning => format!(" --planner {}", PlannerKind::RandomWalk),
+            Role::Localization => format!(" --estimator {}", EstimatorKind::Pf),
+            _ => String::new(),
+        };
+        let command = format!("{}{options}", row.program);
+        let args = [row.role.name(), command.as_str()];
+        let out = mole_swap(&ns, &args);
         assert!(out.status.success(), "{args:?}: {}", text(&out));
         assert!(
             text(&out).contains("lockstep: 0 steps lost, 0 repeated"),
@@ -75,7 +94,8 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     }
     let out = run_mole(&["status", "--namespace", &ns]);
     assert!(out.status.success(), "{}", text(&out));
-    assert!(text(&out).contains("planning (pid"), "{}", text(&out));
+    let planning_line = format!("{} (pid", planning.role);
+    assert!(text(&out).contains(&planning_line), "{}", text(&out));
 
     let out = run_mole(&["stop", "--namespace", &ns]);
     assert!(out.status.success(), "{}", text(&out));
@@ -86,29 +106,31 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     let log = |role: &str| {
         std::fs::read_to_string(keep.join(format!("logs/{role}.log"))).unwrap_or_default()
     };
-    let (mapping_log, localization_log) = (log("mapping"), log("localization"));
+    let (mapping_log, localization_log) =
+        (log(Role::Mapping.name()), log(Role::Localization.name()));
     let _ = std::fs::remove_dir_all(&keep);
+    assert!(took_over(&mapping_log, Role::Mapping), "{mapping_log}");
     assert!(
-        mapping_log.contains("took over the running grids"),
-        "{mapping_log}"
-    );
-    assert!(
-        localization_log.contains("took over the running estimate"),
+        took_over(&localization_log, Role::Localization),
         "{localization_log}"
     );
-    assert_eq!(s["exit_reason"], "stopped", "{s}");
-    let swaps = s["swaps"].as_array().expect("swaps in summary.json");
-    assert_eq!(swaps.len(), 4, "{s}");
-    for swap in swaps {
+    assert_eq!(s.exit_reason, EndReason::Stopped.name(), "{s:#?}");
+    let swapped: Vec<&str> = s.swaps.iter().map(|w| w.role.as_str()).collect();
+    let expected: Vec<&str> = swappable.iter().map(|r| r.role.name()).collect();
+    assert_eq!(swapped, expected, "{s:#?}");
+    for swap in &s.swaps {
         // "0 lost, 0 repeated" means something only over ticks the launcher saw.
-        assert!(
-            swap["ticks_observed"].as_u64().is_some_and(|n| n > 0),
-            "{swap}"
-        );
-        assert_eq!(swap["steps_lost"], 0, "{swap}");
-        assert_eq!(swap["steps_repeated"], 0, "{swap}");
+        assert!(swap.ticks_observed > 0, "{swap:?}");
+        assert_eq!((swap.steps_lost, swap.steps_repeated), (0, 0), "{swap:?}");
     }
-    assert_eq!(s["restarts"]["planning"], 0, "a swap is not a restart: {s}");
+    for row in &swappable {
+        let role = row.role.name();
+        assert_eq!(
+            s.restarts.get(role),
+            Some(&0),
+            "a swap is not a restart: {s:#?}"
+        );
+    }
     let leftovers = left_behind(&before);
     assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
 }
@@ -120,12 +142,15 @@ fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
     let _serial = serial();
     let before = shm_files();
     let stack = Stack::start("swap-realtime", &["--mode", "realtime", "--ticks", "800"]);
-    stack.wait_for_log("localization", "map received", Duration::from_secs(60));
-    // Another estimator, which takes over the running estimate instead of starting over.
-    let out = mole_swap(
-        &stack.namespace,
-        &["localization", "mole-localization --estimator pf"],
+    let localization = Role::Localization.spec();
+    stack.wait_for_log(
+        localization.role.name(),
+        "map received",
+        Duration::from_secs(60),
     );
+    // Another estimator, which takes over the running estimate instead of starting over.
+    let command = format!("{} --estimator {}", localization.program, EstimatorKind::Pf);
+    let out = mole_swap(&stack.namespace, &[localization.role.name(), &command]);
     assert!(out.status.success(), "{}", text(&out));
     assert!(
         text(&out).contains("localization/pose silent for at most"),
@@ -146,29 +171,31 @@ fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
     assert!(output.status.success(), "{}", logs(&keep));
     let s = summary(&keep);
     let localization_log =
-        std::fs::read_to_string(keep.join("logs/localization.log")).unwrap_or_default();
+        std::fs::read_to_string(keep.join("logs").join(format!("{}.log", localization.role)))
+            .unwrap_or_default();
     let _ = std::fs::remove_dir_all(&keep);
-    assert_eq!(s["ticks"], 800);
-    let swaps = s["swaps"].as_array().expect("swaps in summary.json");
-    assert_eq!(swaps.len(), 1, "{s}");
-    let gap = swaps[0]["gap_ms"].as_f64().unwrap();
-    let period = swaps[0]["median_interval_ms"].as_f64().unwrap();
+    assert_eq!(s.ticks, 800);
+    let [swap] = &s.swaps[..] else {
+        panic!("one swap in summary.json: {s:#?}");
+    };
+    let (gap, period) = (swap.gap_ms, swap.median_interval_ms);
     // Make before break: the pose never stops for long (no restart, no timeout); a bound of
     // a second is a correctness check (a lost role would stay silent), not a timing target.
     assert!(gap > 0.0 && gap < 1000.0, "gap {gap} ms");
-    assert!(period > 0.0, "{s}");
-    assert!(
-        swaps[0]["ticks_observed"].as_u64().is_some_and(|n| n > 0),
-        "{s}"
+    assert!(period > 0.0, "{s:#?}");
+    assert!(swap.ticks_observed > 0, "{s:#?}");
+    assert_eq!(
+        s.restarts.get(localization.role.name()),
+        Some(&0),
+        "a swap is not a restart"
     );
-    assert_eq!(s["restarts"]["localization"], 0, "a swap is not a restart");
     assert!(
-        localization_log.contains("took over the running estimate"),
+        took_over(&localization_log, Role::Localization),
         "{localization_log}"
     );
     // Starting over at the start pose mid-run cost 0.9 m of RMSE; taking over costs nothing
     // the EKF's ~1 cm would notice. 0.2 m is a correctness bound, not a target.
-    let rmse = s["localization_rmse_m"].as_f64().unwrap();
+    let rmse = s.localization_rmse_m.expect("an RMSE");
     assert!(rmse < 0.2, "localization RMSE {rmse} m after the swap");
     let leftovers = left_behind(&before);
     assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
@@ -176,9 +203,10 @@ fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
 
 #[test]
 fn swap_with_no_stack_in_the_namespace_is_bad_input() {
+    let planning = Role::Planning.spec();
     let out = mole_swap(
         &unique_namespace("swap-none"),
-        &["planning", "mole-planning"],
+        &[planning.role.name(), planning.program],
     );
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
     assert!(text(&out).contains("no stack is running"), "{}", text(&out));

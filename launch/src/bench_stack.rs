@@ -3,6 +3,7 @@
 use crate::stats::{HopLatency, ProcessUsage};
 use crate::up::{Failure, UpArgs, up};
 use clap::Args;
+use mole_monitor::LatencyUs;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -26,7 +27,7 @@ pub struct StackReport {
     /// Steps per wall-clock second (the lockstep throughput).
     pub steps_per_s: f64,
     /// Loop latency, the world's state to the command back at the world (µs).
-    pub loop_latency_us: serde_json::Value,
+    pub loop_latency_us: LatencyUs,
     /// Origin → receipt at every subscriber, per topic.
     pub hops: Vec<HopLatency>,
     /// CPU time and peak memory per process.
@@ -42,14 +43,10 @@ pub fn bench_stack(args: &BenchStackArgs) -> Result<StackReport, Failure> {
     let mut up_args = args.up.clone();
     up_args.quiet = true;
     let outcome = up(&up_args)?;
-    let text = std::fs::read_to_string(&outcome.summary_path)
-        .map_err(|e| Failure::run(format!("{}: {e}", outcome.summary_path.display())))?;
-    let summary: serde_json::Value = serde_json::from_str(&text)
-        .map_err(|e| Failure::run(format!("{}: {e}", outcome.summary_path.display())))?;
-    let ticks = summary["ticks"].as_u64().unwrap_or(0);
-    let wall_time_s = summary["wall_time_s"].as_f64().unwrap_or(0.0);
+    let summary = &outcome.summary;
+    let (ticks, wall_time_s) = (summary.ticks, summary.wall_time_s);
     let report = StackReport {
-        mode: summary["mode"].as_str().unwrap_or("?").to_string(),
+        mode: summary.mode.clone(),
         ticks,
         wall_time_s,
         steps_per_s: if wall_time_s > 0.0 {
@@ -57,7 +54,7 @@ pub fn bench_stack(args: &BenchStackArgs) -> Result<StackReport, Failure> {
         } else {
             0.0
         },
-        loop_latency_us: summary["loop_latency_us"].clone(),
+        loop_latency_us: summary.loop_latency_us.clone(),
         hops: outcome.stats.hops(),
         processes: outcome.stats.processes(),
         summary: outcome.summary_path.clone(),
@@ -95,19 +92,23 @@ pub fn check_writable(path: &std::path::Path) -> Result<(), Failure> {
 fn render(r: &StackReport) -> String {
     let mut s = String::new();
     let lat = &r.loop_latency_us;
+    let us = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.1}"));
     let _ = writeln!(
         s,
         "{} run: {} steps in {:.2} s = {:.0} steps/s\nloop latency (world state → command at the world): p50 {} µs, p99 {} µs, max {} µs",
-        r.mode, r.ticks, r.wall_time_s, r.steps_per_s, lat["p50"], lat["p99"], lat["max"]
+        r.mode,
+        r.ticks,
+        r.wall_time_s,
+        r.steps_per_s,
+        us(lat.p50),
+        us(lat.p99),
+        us(lat.max)
     );
-    if let Some(buckets) = lat["histogram"].as_array() {
-        let total: f64 = buckets.iter().filter_map(|b| b[1].as_f64()).sum();
-        for b in buckets {
-            let (upper, count) = (b[0].as_f64().unwrap_or(0.0), b[1].as_f64().unwrap_or(0.0));
-            if count > 0.0 {
-                let bar = "#".repeat(((count / total.max(1.0)) * 50.0).ceil() as usize);
-                let _ = writeln!(s, "  ≤ {upper:>9.0} µs {count:>8.0} {bar}");
-            }
+    let total: f64 = lat.histogram.iter().map(|[_, count]| count).sum();
+    for &[upper, count] in &lat.histogram {
+        if count > 0.0 {
+            let bar = "#".repeat(((count / total.max(1.0)) * 50.0).ceil() as usize);
+            let _ = writeln!(s, "  ≤ {upper:>9.0} µs {count:>8.0} {bar}");
         }
     }
     let _ = writeln!(

@@ -11,12 +11,10 @@
 use crate::ChildSpec;
 use crate::Supervisor;
 use mole_runtime::{ClockMode, Context, Subscriber, cleanup_dead_nodes};
-use mole_types::{Message, Stats, Topic, read_name, topics};
+use mole_types::graph::{self, Resume, RoleSpec, Swap};
+use mole_types::topics::{self, TopicVisitor};
+use mole_types::{GRAPH, Message, Stats, Topic, env, read_name};
 use std::time::{Duration, Instant};
-
-/// Roles whose state is the run itself: swapping them would restart the simulation or its
-/// bookkeeping, so a swap refuses them (`mole up --swap` can still replace them at start).
-pub const UNSWAPPABLE: &[&str] = &["world", "monitor"];
 
 /// How long the new process may take to handle its first step.
 const TAKEOVER_TIMEOUT: Duration = Duration::from_secs(20);
@@ -41,7 +39,7 @@ pub struct SwapReport {
     /// Lockstep: world steps missing from world/truth or from `topic` during the swap.
     pub steps_lost: u64,
     /// Lockstep: steps handled twice during the swap: published twice on world/truth, or
-    /// twice on the output of a process that reads `topic` ([`consumer_outputs`]).
+    /// twice on the output of a process that reads `topic` ([`graph::consumer_outputs`]).
     pub steps_repeated: u64,
     /// The world's tick when the old process was gone.
     pub tick: u64,
@@ -72,26 +70,32 @@ pub struct SwapEnv<'a> {
     pub stop_timeout: Duration,
 }
 
-/// The topic that shows a role at work: one message per handled step.
-pub fn output_topic(role: &str) -> Option<&'static str> {
-    Some(match role {
-        "sensing" => topics::SENSING_SCAN.name,
-        "localization" => topics::LOCALIZATION_POSE.name,
-        "mapping" => topics::MAPPING_GRID.name,
-        "planning" => topics::PLANNING_CMD.name,
-        _ => return None,
-    })
-}
-
-/// Refuses the roles a running stack cannot swap.
-pub fn check_swappable(role: &str) -> Result<(), SwapError> {
-    if UNSWAPPABLE.contains(&role) {
-        return Err(SwapError::Refused(format!(
-            "`{role}` holds the run's state and cannot be swapped while it runs; restart the \
-             stack with `mole up --swap {role}=COMMAND` instead"
-        )));
+/// The graph's row of a role `mole swap` may replace, with the step output a swap is watched on;
+/// refuses a role the graph does not have or says may not be swapped, naming why (`mole up
+/// --swap` can still replace it at start).
+pub fn check_swappable(role: &str) -> Result<(&'static RoleSpec, &'static str), SwapError> {
+    let swappable: Vec<&str> = GRAPH
+        .iter()
+        .filter(|r| r.swap == Swap::Allowed)
+        .map(|r| r.role.name())
+        .collect();
+    let spec = graph::spec(role).ok_or_else(|| {
+        SwapError::Refused(format!(
+            "no role `{role}` in the stack's graph; swappable roles: {}",
+            swappable.join(", ")
+        ))
+    })?;
+    match (spec.swap, spec.step_output) {
+        (Swap::Allowed, Some(topic)) => Ok((spec, topic)),
+        (Swap::Allowed, None) => Err(SwapError::Refused(format!(
+            "`{role}` has no step output to watch a swap on"
+        ))),
+        (Swap::Refused(why), _) => Err(SwapError::Refused(format!(
+            "`{role}` cannot be swapped while the stack runs: {why}; restart the stack with \
+             `mole up --swap {role}=COMMAND` instead (swappable roles: {})",
+            swappable.join(", ")
+        ))),
     }
-    Ok(())
 }
 
 /// Header stamps and ticks of one topic, read as they come.
@@ -117,47 +121,32 @@ fn watch<M: Message>(ctx: &Context, topic: Topic<M>) -> Result<Box<dyn Watch>, S
     Ok(Box::new(TopicWatch(sub)))
 }
 
-/// A watcher of one of the topics a swap watches, by name.
+/// Finds a topic of the table by name and watches it, typed.
+struct WatchByName<'a> {
+    ctx: &'a Context,
+    name: &'a str,
+    found: Option<Result<Box<dyn Watch>, SwapError>>,
+}
+
+impl TopicVisitor for WatchByName<'_> {
+    fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
+        if self.found.is_none() && topic.name == self.name {
+            self.found = Some(watch(self.ctx, topic));
+        }
+    }
+}
+
+/// A watcher of a topic of the table, by name.
 fn watch_topic(ctx: &Context, name: &str) -> Result<Box<dyn Watch>, SwapError> {
-    match name {
-        n if n == topics::SENSING_SCAN.name => watch(ctx, topics::SENSING_SCAN),
-        n if n == topics::LOCALIZATION_POSE.name => watch(ctx, topics::LOCALIZATION_POSE),
-        n if n == topics::MAPPING_GRID.name => watch(ctx, topics::MAPPING_GRID),
-        n if n == topics::PLANNING_CMD.name => watch(ctx, topics::PLANNING_CMD),
-        n if n == topics::WORLD_TRUTH.name => watch(ctx, topics::WORLD_TRUTH),
-        _ => Err(SwapError::Failed(format!(
-            "the launcher cannot watch `{name}`"
-        ))),
-    }
-}
-
-fn watch_output(ctx: &Context, role: &str) -> Result<(&'static str, Box<dyn Watch>), SwapError> {
-    let Some(topic) = output_topic(role) else {
-        return Err(SwapError::Refused(format!(
-            "`{role}` has no output topic the launcher knows; swappable roles: sensing, \
-             localization, mapping, planning"
-        )));
+    let mut finder = WatchByName {
+        ctx,
+        name,
+        found: None,
     };
-    Ok((topic, watch_topic(ctx, topic)?))
-}
-
-/// What the processes that read `role`'s output publish once per handled step (the process
-/// table of docs/architecture.md), world/truth aside: every swap watches it, and the world reads
-/// planning/cmd, which every role's output leads to. A tick twice on one of these is a step a
-/// consumer handled twice.
-pub fn consumer_outputs(role: &str) -> &'static [&'static str] {
-    match role {
-        // Localization reads odometry, mapping and planning the scan and touch.
-        "sensing" => &[
-            topics::LOCALIZATION_POSE.name,
-            topics::MAPPING_GRID.name,
-            topics::PLANNING_CMD.name,
-        ],
-        "localization" => &[topics::MAPPING_GRID.name, topics::PLANNING_CMD.name],
-        "mapping" => &[topics::PLANNING_CMD.name],
-        // The world is planning's consumer: world/truth.
-        _ => &[],
-    }
+    topics::for_each(&mut finder);
+    finder
+        .found
+        .unwrap_or_else(|| Err(SwapError::Failed(format!("no topic `{name}` to watch"))))
 }
 
 /// Stamps and ticks of one watched topic, in arrival order.
@@ -173,7 +162,7 @@ struct Observed {
     /// The swapped role's output: both processes answer while they overlap.
     output: Seen,
     truth: Seen,
-    /// The outputs of the role's consumers ([`consumer_outputs`]).
+    /// The outputs of the role's consumers ([`graph::consumer_outputs`]).
     consumers: Vec<Seen>,
 }
 
@@ -182,16 +171,16 @@ struct Observed {
 pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapError> {
     let started = Instant::now();
     let role = spec.role.clone();
-    check_swappable(&role)?;
+    let (row, topic) = check_swappable(&role)?;
     let Some(old_pid) = env.supervisor.pid(&role) else {
         return Err(SwapError::Refused(format!("`{role}` is not running")));
     };
-    let (topic, mut out_watch) = watch_output(env.ctx, &role)?;
+    let mut out_watch = watch_topic(env.ctx, topic)?;
     let mut truth_watch = watch(env.ctx, topics::WORLD_TRUTH)?;
     // Only lockstep counts repeats: a realtime consumer handles the newest tick it has.
     let consumers = match env.mode {
-        ClockMode::Lockstep => consumer_outputs(&role),
-        ClockMode::Realtime => &[],
+        ClockMode::Lockstep => graph::consumer_outputs(row.role),
+        ClockMode::Realtime => Vec::new(),
     };
     let mut consumer_watches = consumers
         .iter()
@@ -209,10 +198,12 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
         }
     };
 
-    // Tells a stateful replacement (localization) to start from its predecessor's state.
+    // Tells a replacement that resumes (the graph says which) to start from its predecessor's
+    // last output.
     let mut spec = spec;
-    spec.env
-        .push(("MOLE_TAKEOVER".to_owned(), "true".to_owned()));
+    if matches!(row.resume, Resume::From(_)) {
+        spec.env.push((env::TAKEOVER.to_owned(), "true".to_owned()));
+    }
     let pid = env
         .supervisor
         .start_replacement(spec)
@@ -421,13 +412,28 @@ mod tests {
         assert_eq!(steps_repeated(&thrice), 2);
     }
 
+    /// `mole swap` follows the graph: a swappable role is accepted, the world and the monitor
+    /// are refused naming why, a name that is no role is refused naming the swappable ones.
     #[test]
-    fn every_swappable_role_has_an_output_topic() {
-        for role in ["sensing", "localization", "mapping", "planning"] {
-            assert!(output_topic(role).is_some(), "{role}");
+    fn swaps_are_refused_where_the_graph_says() {
+        for row in GRAPH {
+            match (row.swap, check_swappable(row.role.name())) {
+                (Swap::Allowed, Ok((spec, topic))) => {
+                    assert_eq!(spec.role, row.role);
+                    assert_eq!(Some(topic), row.step_output);
+                }
+                (Swap::Refused(why), Err(SwapError::Refused(text))) => {
+                    assert!(text.contains(why), "{text}")
+                }
+                (swap, result) => panic!("{}: {swap:?} but {result:?}", row.role),
+            }
         }
-        for role in UNSWAPPABLE {
-            assert!(output_topic(role).is_none(), "{role}");
-        }
+        let Err(SwapError::Refused(text)) = check_swappable("navigator") else {
+            panic!("an unknown role is refused");
+        };
+        assert!(
+            text.contains("sensing, localization, mapping, planning"),
+            "{text}"
+        );
     }
 }

@@ -11,10 +11,10 @@
 //! anywhere inside it.
 
 use std::collections::BTreeMap;
-use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use mole_types::{ClockMode, EstimatorKind, PlannerKind, Role, UnknownChoice};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -24,44 +24,14 @@ use crate::order;
 /// Where `mole up` looks when no launch file is given.
 pub const DEFAULT_LAUNCH_FILE: &str = "launch/stacks/default.toml";
 
-/// How the stack keeps time (docs/architecture.md, "Clock modes").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Mode {
-    /// The world steps at a fixed rate; every process reacts to the newest input.
-    #[default]
-    Realtime,
-    /// Deterministic: step k waits for every input of step k-1.
-    Lockstep,
-}
+/// A closed choice read from a launch file through its `FromStr`, so a wrong name is refused
+/// with the choice's own message (every valid name), located like any other field error.
+struct Choice<T>(T);
 
-impl Mode {
-    /// The name used in launch files and on the command line.
-    #[must_use]
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Realtime => "realtime",
-            Self::Lockstep => "lockstep",
-        }
-    }
-}
-
-impl fmt::Display for Mode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for Mode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "realtime" => Ok(Self::Realtime),
-            "lockstep" => Ok(Self::Lockstep),
-            other => Err(format!(
-                "unknown mode `{other}`, expected `realtime` or `lockstep`"
-            )),
-        }
+impl<'de, T: FromStr<Err = UnknownChoice>> Deserialize<'de> for Choice<T> {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(deserializer)?;
+        text.parse().map(Choice).map_err(serde::de::Error::custom)
     }
 }
 
@@ -113,17 +83,17 @@ pub struct StackSpec {
     /// Scenario (world) file, as written; resolve it with [`LaunchFile::resolve_path`].
     pub scenario: Option<PathBuf>,
     /// Clock mode.
-    pub mode: Mode,
+    pub mode: ClockMode,
     /// World step rate in Hz (realtime mode); > 0.
     pub rate_hz: f64,
     /// Number of world steps to run; `None` with `duration_s` also `None` runs until Ctrl-C.
     pub ticks: Option<u64>,
     /// Run length in simulated seconds; never set together with `ticks`.
     pub duration_s: Option<f64>,
-    /// Planner name handed to the planning process.
-    pub planner: String,
-    /// Estimator name handed to the localization process.
-    pub estimator: String,
+    /// The planner of the planning process.
+    pub planner: PlannerKind,
+    /// The estimator of the localization process.
+    pub estimator: EstimatorKind,
     /// Random seed of the run.
     pub seed: u64,
     /// How long children get between SIGTERM and SIGKILL at shutdown.
@@ -134,12 +104,12 @@ impl Default for StackSpec {
     fn default() -> Self {
         Self {
             scenario: None,
-            mode: Mode::Realtime,
+            mode: ClockMode::Realtime,
             rate_hz: 100.0,
             ticks: None,
             duration_s: None,
-            planner: "random-walk".to_owned(),
-            estimator: "ekf".to_owned(),
+            planner: PlannerKind::RandomWalk,
+            estimator: EstimatorKind::Ekf,
             seed: 0,
             shutdown_timeout_ms: 3000,
         }
@@ -149,7 +119,7 @@ impl Default for StackSpec {
 /// One `[[process]]` table.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProcessSpec {
-    /// Unique role name (letters, digits, `-`, `_`); also names the log file.
+    /// The role's name, one of the graph's ([`mole_types::GRAPH`]); also names the log file.
     pub role: String,
     /// Program: a bare name (next to `mole`, then `PATH`) or a path.
     pub command: String,
@@ -201,11 +171,11 @@ pub struct StackOverrides {
     /// `--scenario`.
     pub scenario: Option<PathBuf>,
     /// `--planner`.
-    pub planner: Option<String>,
+    pub planner: Option<PlannerKind>,
     /// `--estimator`.
-    pub estimator: Option<String>,
+    pub estimator: Option<EstimatorKind>,
     /// `--mode`.
-    pub mode: Option<Mode>,
+    pub mode: Option<ClockMode>,
     /// `--ticks` (clears the file's `duration_s`).
     pub ticks: Option<u64>,
     /// `--duration` in seconds (clears the file's `ticks`).
@@ -220,11 +190,11 @@ impl StackOverrides {
         if let Some(s) = &self.scenario {
             stack.scenario = Some(s.clone());
         }
-        if let Some(p) = &self.planner {
-            stack.planner.clone_from(p);
+        if let Some(p) = self.planner {
+            stack.planner = p;
         }
-        if let Some(e) = &self.estimator {
-            stack.estimator.clone_from(e);
+        if let Some(e) = self.estimator {
+            stack.estimator = e;
         }
         if let Some(m) = self.mode {
             stack.mode = m;
@@ -258,12 +228,12 @@ struct RawLaunchFile {
 #[serde(deny_unknown_fields)]
 struct RawStack {
     scenario: Option<PathBuf>,
-    mode: Option<Mode>,
+    mode: Option<Choice<ClockMode>>,
     rate_hz: Option<Spanned<f64>>,
     ticks: Option<Spanned<u64>>,
     duration_s: Option<Spanned<f64>>,
-    planner: Option<String>,
-    estimator: Option<String>,
+    planner: Option<Choice<PlannerKind>>,
+    estimator: Option<Choice<EstimatorKind>>,
     seed: Option<u64>,
     shutdown_timeout_ms: Option<u64>,
 }
@@ -323,17 +293,11 @@ pub fn parse_launch_file(text: &str, path: &Path) -> Result<LaunchFile, LaunchEr
     let mut processes = Vec::with_capacity(raw.process.len());
     for (i, p) in raw.process.iter().enumerate() {
         let role = p.role.get_ref();
-        if role.is_empty()
-            || !role
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-        {
+        if let Err(e) = role.parse::<Role>() {
             return Err(invalid(
                 Some(p.role.span()),
                 format!("process[{i}].role"),
-                format!(
-                    "invalid role `{role}`, expected a non-empty name of letters, digits, `-` and `_`"
-                ),
+                e.to_string(),
             ));
         }
         if let Some(first) = raw.process[..i].iter().find(|q| q.role.get_ref() == role) {
@@ -480,13 +444,13 @@ fn validate_stack(
         stack.duration_s = Some(secs);
     }
     stack.scenario = s.scenario;
-    if let Some(m) = s.mode {
+    if let Some(Choice(m)) = s.mode {
         stack.mode = m;
     }
-    if let Some(p) = s.planner {
+    if let Some(Choice(p)) = s.planner {
         stack.planner = p;
     }
-    if let Some(e) = s.estimator {
+    if let Some(Choice(e)) = s.estimator {
         stack.estimator = e;
     }
     if let Some(seed) = s.seed {

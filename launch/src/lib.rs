@@ -20,7 +20,7 @@ pub mod up;
 
 pub use error::LaunchError;
 pub use launch_file::{
-    DEFAULT_LAUNCH_FILE, LaunchFile, Mode, ProcessSpec, RestartPolicy, RestartWhen, StackOverrides,
+    DEFAULT_LAUNCH_FILE, LaunchFile, ProcessSpec, RestartPolicy, RestartWhen, StackOverrides,
     StackSpec, load_launch_file, parse_launch_file, resolve_data_path,
 };
 pub use order::{start_order, stop_order};

@@ -1,7 +1,9 @@
-//! Start and stop order of the processes of a stack, from their `depends_on` lists.
+//! Start order of the processes of a stack, from their `depends_on` lists; stop order, from the
+//! graph's stop ranks.
 
 use crate::LaunchError;
 use crate::launch_file::ProcessSpec;
+use mole_types::graph;
 
 /// Topological order (Kahn 1962): each process after everything it depends on; among processes
 /// that are ready at the same time, file order wins, so the order is stable and predictable.
@@ -44,11 +46,13 @@ pub fn start_order(processes: &[ProcessSpec]) -> Result<Vec<usize>, LaunchError>
     Ok(order)
 }
 
-/// Reverse of [`start_order`]: dependents stop before what they depend on.
-pub fn stop_order(processes: &[ProcessSpec]) -> Result<Vec<usize>, LaunchError> {
-    let mut order = start_order(processes)?;
-    order.reverse();
-    Ok(order)
+/// The graph's stop order ([`mole_types::RoleSpec::stop_rank`]): the world first, so nothing
+/// new is produced, the monitor last, so it can still write its files. Returns indices into
+/// `processes`; a role the graph does not have (a launch file cannot name one) stops last.
+pub fn stop_order(processes: &[ProcessSpec]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..processes.len()).collect();
+    order.sort_by_key(|&i| graph::spec(&processes[i].role).map_or(u8::MAX, |s| s.stop_rank));
+    order
 }
 
 /// Every unplaced process waits on at least one unplaced one, so walking "first unplaced
@@ -78,6 +82,7 @@ fn find_cycle(processes: &[ProcessSpec], deps: &[Vec<usize>], placed: &[bool]) -
 mod tests {
     use super::*;
     use crate::launch_file::RestartPolicy;
+    use mole_types::{GRAPH, Role};
     use proptest::prelude::*;
 
     fn p(role: &str, deps: &[&str]) -> ProcessSpec {
@@ -91,21 +96,25 @@ mod tests {
         }
     }
 
+    /// The default stack (the world depending on every other role) starts the world last and
+    /// the others in file order; it stops in the graph's order, the world first, the monitor last.
     #[test]
-    fn default_stack_starts_world_last_and_keeps_file_order() {
-        let ps = [
-            p(
-                "world",
-                &["sensing", "localization", "mapping", "planning", "monitor"],
-            ),
-            p("sensing", &[]),
-            p("localization", &[]),
-            p("mapping", &[]),
-            p("planning", &[]),
-            p("monitor", &[]),
-        ];
+    fn default_stack_starts_world_last_and_stops_in_the_graph_order() {
+        let others: Vec<&str> = GRAPH
+            .iter()
+            .map(|r| r.role.name())
+            .filter(|r| *r != Role::World.name())
+            .collect();
+        let mut ps = vec![p(Role::World.name(), &others)];
+        ps.extend(others.iter().map(|r| p(r, &[])));
         assert_eq!(start_order(&ps).unwrap(), vec![1, 2, 3, 4, 5, 0]);
-        assert_eq!(stop_order(&ps).unwrap(), vec![0, 5, 4, 3, 2, 1]);
+        let stopping: Vec<Role> = stop_order(&ps)
+            .into_iter()
+            .map(|i| ps[i].role.parse().unwrap())
+            .collect();
+        assert_eq!(stopping, graph::stop_order());
+        assert_eq!(stopping.first(), Some(&Role::World));
+        assert_eq!(stopping.last(), Some(&Role::Monitor));
     }
 
     #[test]

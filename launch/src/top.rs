@@ -1,12 +1,12 @@
 //! `mole top`: a live view of a running stack (topics, processes), refreshed every second.
 
 use crate::stats::StatsCollector;
-use crate::up::Failure;
+use crate::up::{Failure, LAUNCHER_NODE};
 use clap::Args;
 use mole_runtime::{ClockMode, CommonArgs, Context, Subscriber, live_nodes_in_namespace};
 use mole_types::{
-    PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, PROCESS_RUNNING, Processes, RunStatus,
-    Stats, read_name, topics,
+    GRAPH, PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, PROCESS_RUNNING, Processes,
+    RunStatus, Stats, read_name, topics,
 };
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -52,6 +52,7 @@ fn open(namespace: &str, shutdown: Arc<AtomicBool>) -> Result<(Context, Ports), 
             mode,
             rate_hz: 100.0,
             seed: None,
+            takeover: false,
         };
         let ctx = Context::with_shutdown_flag(TOP_ROLE, &args, shutdown.clone())
             .map_err(|e| Failure::run(e.to_string()))?;
@@ -119,6 +120,21 @@ impl Drop for RawTerminal {
             );
         }
     }
+}
+
+/// The rows of the process table: the graph's roles in its order, then any other process the
+/// launcher supervises or that publishes statistics (not the launcher and `mole top` themselves).
+fn listed_roles(
+    supervised: impl IntoIterator<Item = String>,
+    heard: impl IntoIterator<Item = String>,
+) -> Vec<String> {
+    let mut roles: Vec<String> = GRAPH.iter().map(|r| r.role.name().to_owned()).collect();
+    for role in supervised.into_iter().chain(heard) {
+        if !roles.contains(&role) && role != LAUNCHER_NODE && role != TOP_ROLE {
+            roles.push(role);
+        }
+    }
+    roles
 }
 
 fn state_name(state: u32) -> &'static str {
@@ -230,15 +246,10 @@ fn render(
         .latest()
         .map(|p| p.processes().to_vec())
         .unwrap_or_default();
-    let mut roles: Vec<String> = supervised
-        .iter()
-        .map(|p| read_name(&p.role).into_owned())
-        .collect();
-    for role in latest.keys() {
-        if !roles.contains(role) && role != "launcher" && role != TOP_ROLE {
-            roles.push(role.clone());
-        }
-    }
+    let roles = listed_roles(
+        supervised.iter().map(|p| read_name(&p.role).into_owned()),
+        latest.keys().cloned(),
+    );
     for role in &roles {
         let sup = supervised
             .iter()
@@ -279,4 +290,23 @@ fn render(
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every graph role has a row, in the graph's order, even before it is heard from; other
+    /// processes follow; the launcher and `mole top` do not.
+    #[test]
+    fn the_process_table_lists_the_graph_first() {
+        let extra = "recorder".to_owned();
+        let roles = listed_roles(
+            [GRAPH[2].role.name().to_owned(), extra.clone()],
+            [LAUNCHER_NODE.to_owned(), TOP_ROLE.to_owned()],
+        );
+        let graph: Vec<String> = GRAPH.iter().map(|r| r.role.name().to_owned()).collect();
+        assert_eq!(roles[..GRAPH.len()], graph[..]);
+        assert_eq!(roles[GRAPH.len()..], [extra]);
+    }
 }

@@ -1,21 +1,27 @@
-//! `mole up`: start the stack, supervise it, wait for the end, and complete the summary.
+//! `mole up` in four stages: [`prepare`] (launch file, scenario, overrides, environment: every
+//! refusal happens here, before anything starts), [`start`] (the processes in dependency
+//! order), [`supervise`] (until the run ends: a typed [`RunEnd`]) and [`finish`] (stop in the
+//! graph's order, complete summary.json).
 
-use crate::RestartWhen;
+mod prepare;
+
 use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::{
-    ChildSpec, DEFAULT_LAUNCH_FILE, ExitStatus, LaunchFile, Mode, StackOverrides, Supervisor,
-    SupervisorEvent, apply_swaps, load_launch_file, parse_swap, resolve_program, start_order,
-    stop_order,
+    ChildSpec, ExitStatus, LaunchFile, RestartWhen, Supervisor, SupervisorEvent, resolve_program,
+    start_order, stop_order,
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use mole_runtime::{ClockMode, CommonArgs, Context, cleanup_dead_nodes, live_nodes_in_namespace};
+use mole_monitor::{Summary, SwapRecord, read_summary, write_summary};
+use mole_runtime::{CommonArgs, Context, ControlServer, Publisher, Subscriber, cleanup_dead_nodes};
 use mole_types::{
-    CONTROL_FAILED, CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP, ControlRequest,
-    Stats, read_name, topics, write_name,
+    CONTROL_FAILED, CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP, ClockMode,
+    ControlRequest, EndReason, EstimatorKind, PlannerKind, Processes, Role, RunStatus, Stats,
+    read_name, topics, write_name,
 };
+use prepare::{Plan, prepare};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -34,6 +40,8 @@ const HANG_TIMEOUT: Duration = Duration::from_secs(5);
 const STALL_TIMEOUT: Duration = Duration::from_secs(15);
 /// The launcher's wake-up period (supervision and progress).
 const POLL: Duration = Duration::from_millis(50);
+/// The launcher's own node name; its statistics are not a role's.
+pub const LAUNCHER_NODE: &str = "launcher";
 
 #[derive(Debug, Clone, Args)]
 pub struct UpArgs {
@@ -42,15 +50,16 @@ pub struct UpArgs {
     /// Scenario file, instead of the launch file's.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
-    /// Planner, instead of the launch file's.
+    /// Planner, instead of the launch file's: random-walk, apf, dwa or frontier.
     #[arg(long)]
-    pub planner: Option<String>,
-    /// Estimator, instead of the launch file's.
+    pub planner: Option<PlannerKind>,
+    /// Estimator, instead of the launch file's: bayes, kf, ekf, pf, ekf-slam, fastslam or
+    /// graph-slam.
     #[arg(long)]
-    pub estimator: Option<String>,
+    pub estimator: Option<EstimatorKind>,
     /// Clock mode: realtime or lockstep.
     #[arg(long)]
-    pub mode: Option<Mode>,
+    pub mode: Option<ClockMode>,
     /// Steps to run.
     #[arg(long, conflicts_with = "duration")]
     pub ticks: Option<u64>,
@@ -62,7 +71,7 @@ pub struct UpArgs {
     pub goal: Option<(f64, f64)>,
     /// Local planner that follows frontier paths: dwa or apf.
     #[arg(long, value_name = "dwa|apf")]
-    pub local_planner: Option<String>,
+    pub local_planner: Option<PlannerKind>,
     /// Seed for every random number of the run.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -81,6 +90,7 @@ pub struct UpArgs {
 }
 
 /// A failure of `mole up`, with the exit code it deserves.
+#[derive(Debug)]
 pub struct Failure {
     pub code: u8,
     pub message: String,
@@ -97,6 +107,42 @@ impl Failure {
         Self {
             code: 1,
             message: message.into(),
+        }
+    }
+}
+
+/// How a run ended, as the launcher saw it.
+#[derive(Debug)]
+pub enum RunEnd {
+    /// The world ended the run (its end reason stands) and the monitor wrote its files.
+    Finished,
+    /// `mole stop` asked for it.
+    Stopped,
+    /// Ctrl-C.
+    Interrupted,
+    /// The lockstep run made no step for [`STALL_TIMEOUT`].
+    Stalled(Failure),
+    /// A process failed beyond what its restart policy mends.
+    ProcessFailed(Failure),
+}
+
+impl RunEnd {
+    /// summary.json's `exit_reason` for this end; `None` keeps the monitor's (the world's).
+    pub fn exit_reason(&self) -> Option<&'static str> {
+        match self {
+            RunEnd::Finished => None,
+            RunEnd::Stopped => Some(EndReason::Stopped.name()),
+            RunEnd::Interrupted => Some("interrupted"),
+            RunEnd::Stalled(_) => Some("stalled"),
+            RunEnd::ProcessFailed(_) => Some("process_failed"),
+        }
+    }
+
+    /// The failure `mole up` exits with, if the run failed.
+    fn into_failure(self) -> Option<Failure> {
+        match self {
+            RunEnd::Stalled(f) | RunEnd::ProcessFailed(f) => Some(f),
+            RunEnd::Finished | RunEnd::Stopped | RunEnd::Interrupted => None,
         }
     }
 }
@@ -142,232 +188,267 @@ fn build_process_binaries() -> Result<(), Failure> {
     }
 }
 
-fn default_launch_file() -> PathBuf {
-    let relative = Path::new(DEFAULT_LAUNCH_FILE);
-    if relative.exists() {
-        return relative.to_path_buf();
-    }
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("stacks/default.toml")
-}
-
 /// What a run leaves besides its files.
 pub struct RunOutcome {
     /// summary.json of the run.
     pub summary_path: PathBuf,
+    /// The summary as the launcher completed it.
+    pub summary: Summary,
     /// What the processes reported on stack/stats.
     pub stats: StatsCollector,
 }
 
 /// Runs the stack to its end (or Ctrl-C); the summary is in `args.out`.
 pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
-    let launch_path = args.launch.clone().unwrap_or_else(default_launch_file);
-    let mut launch = load_launch_file(&launch_path).map_err(|e| Failure::input(e.to_string()))?;
-    if let Some(d) = args.duration
-        && !(d.is_finite() && d > 0.0)
-    {
-        return Err(Failure::input(format!(
-            "--duration: expected a positive number of seconds, found {d}"
-        )));
-    }
-    StackOverrides {
-        scenario: args.scenario.clone(),
-        planner: args.planner.clone(),
-        estimator: args.estimator.clone(),
-        mode: args.mode,
-        ticks: args.ticks,
-        duration_s: args.duration,
-        ..StackOverrides::default()
-    }
-    .apply(&mut launch.stack);
-    let swaps = args
-        .swaps
-        .iter()
-        .map(|s| parse_swap(s))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| Failure::input(e.to_string()))?;
-    apply_swaps(&mut launch, &swaps).map_err(|e| Failure::input(e.to_string()))?;
-    let scenario_path = match (&args.scenario, &launch.stack.scenario) {
-        // A path given on the command line is taken as the user typed it.
-        (Some(path), _) => path.clone(),
-        (None, Some(path)) => launch
-            .resolve_path("scenario", path)
-            .map_err(|e| Failure::input(e.to_string()))?,
-        (None, None) => {
-            return Err(Failure::input(format!(
-                "{}: no scenario: set `stack.scenario` or pass --scenario",
-                launch.path.display()
-            )));
+    let plan = prepare(args)?;
+    let mut stack = start(args, plan)?;
+    let end = supervise(&mut stack);
+    finish(stack, end)
+}
+
+/// The launcher's ports on the stack.
+struct Ports {
+    ctx: Context,
+    stats: Subscriber<Stats>,
+    status: Subscriber<RunStatus>,
+    processes: Publisher<Processes>,
+    control: ControlServer,
+}
+
+/// What supervision keeps track of.
+struct Watch {
+    /// The newest step the monitor reported, and when it came (or supervision last looked
+    /// away, for a swap).
+    last_step: (u64, Instant),
+    /// Roles that announced their ports.
+    ready: BTreeSet<String>,
+    /// When each role last published statistics.
+    last_heard: BTreeMap<String, Instant>,
+    hangs: BTreeMap<String, u32>,
+    gave_up: BTreeSet<String>,
+    swaps: Vec<SwapRecord>,
+    collector: StatsCollector,
+    /// When the world ended its run (the monitor writes its files next).
+    world_done_at: Option<Instant>,
+}
+
+impl Watch {
+    fn new() -> Self {
+        Self {
+            last_step: (0, Instant::now()),
+            ready: BTreeSet::new(),
+            last_heard: BTreeMap::new(),
+            hangs: BTreeMap::new(),
+            gave_up: BTreeSet::new(),
+            swaps: Vec::new(),
+            collector: StatsCollector::default(),
+            world_done_at: None,
         }
-    };
-    let scenario =
-        mole_world::load_scenario(&scenario_path).map_err(|e| Failure::input(e.to_string()))?;
-    // No length at all: run until Ctrl-C.
-    let ticks = match (launch.stack.ticks, launch.stack.duration_s) {
-        (Some(ticks), _) => ticks,
-        (None, Some(d)) => (d / scenario.dt).round().max(1.0) as u64,
-        (None, None) => u64::MAX,
-    };
-    let mode: ClockMode = launch
-        .stack
-        .mode
-        .as_str()
-        .parse()
-        .map_err(|e: mole_types::UnknownChoice| Failure::input(e.to_string()))?;
-    let seed = args.seed.unwrap_or(launch.stack.seed);
-
-    let live: Vec<String> = live_nodes_in_namespace(&args.namespace)
-        .into_iter()
-        .filter(|n| !n.ends_with(&format!("/{}", crate::top::TOP_ROLE)))
-        .collect();
-    if !live.is_empty() {
-        return Err(Failure::input(format!(
-            "namespace `{}` is in use by {} live process(es) ({}); stop that stack or choose another --namespace",
-            args.namespace,
-            live.len(),
-            live.join(", ")
-        )));
     }
-    build_process_binaries()?;
-    let beside = std::env::current_exe()
-        .ok()
-        .and_then(|p| p.parent().map(Path::to_path_buf))
-        .unwrap_or_default();
-    let mut programs = BTreeMap::new();
-    for process in &launch.processes {
-        let program = resolve_program(&process.command, &beside)
-            .map_err(|e| Failure::input(e.to_string()))?;
-        programs.insert(process.role.clone(), program);
-    }
-    prepare_out_dir(&args.out)?;
 
+    /// A process's statistics sample: it is alive (hang detection), ready, and counted.
+    fn record(&mut self, s: &Stats) {
+        let role = read_name(&s.process).into_owned();
+        self.last_heard.insert(role.clone(), Instant::now());
+        self.ready.insert(role);
+        self.collector.record(s);
+    }
+}
+
+/// A started stack.
+struct Stack<'a> {
+    args: &'a UpArgs,
+    plan: Plan,
+    ports: Ports,
+    supervisor: Supervisor,
+    watch: Watch,
+    interrupted: Arc<AtomicBool>,
+    progress: ProgressBar,
+    started: Instant,
+}
+
+/// Opens the launcher's ports and starts every process once those it depends on are ready.
+fn start(args: &UpArgs, plan: Plan) -> Result<Stack<'_>, Failure> {
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .map_err(|e| Failure::run(format!("cannot install the Ctrl-C handler: {e}")))?;
-    let common = CommonArgs {
-        namespace: args.namespace.clone(),
-        mode,
-        rate_hz: launch.stack.rate_hz,
-        seed: Some(seed),
+    let ports = open_ports(args, &plan, interrupted.clone()).map_err(Failure::run)?;
+    let order = start_order(&plan.launch.processes).map_err(|e| Failure::input(e.to_string()))?;
+    let mut stack = Stack {
+        args,
+        ports,
+        supervisor: Supervisor::new(),
+        watch: Watch::new(),
+        interrupted,
+        progress: progress_bar(plan.ticks, args.quiet),
+        started: Instant::now(),
+        plan,
     };
-    let ctx = Context::with_shutdown_flag("launcher", &common, interrupted.clone())
-        .map_err(|e| Failure::run(e.to_string()))?;
-    let mut stats_sub = ctx
-        .subscriber(topics::STACK_STATS)
-        .map_err(|e| Failure::run(e.to_string()))?;
-    let mut status_sub = ctx
-        .subscriber(topics::MONITOR_STATUS)
-        .map_err(|e| Failure::run(e.to_string()))?;
-    let mut processes_pub = ctx
-        .publisher(topics::STACK_PROCESSES)
-        .map_err(|e| Failure::run(e.to_string()))?;
-    let mut control = ctx
-        .control_server()
-        .map_err(|e| Failure::run(e.to_string()))?;
-    let mut swaps: Vec<serde_json::Value> = Vec::new();
-    let mut collector = StatsCollector::default();
-    let mut gave_up: BTreeSet<String> = BTreeSet::new();
-    let mut last_report = Instant::now();
-    let mut last_heard: BTreeMap<String, Instant> = BTreeMap::new();
-    let mut hangs: BTreeMap<String, u32> = BTreeMap::new();
-
-    let env = child_env(args, &launch, &scenario_path, ticks, seed);
-    let order = start_order(&launch.processes).map_err(|e| Failure::input(e.to_string()))?;
-    let mut supervisor = Supervisor::new();
-    let mut ready = BTreeSet::new();
-    let started = Instant::now();
+    let Plan {
+        mode, ticks, seed, ..
+    } = stack.plan;
     tracing::info!(namespace = %args.namespace, %mode, ticks, seed, "starting the stack");
-    for &index in &order {
-        let process = &launch.processes[index];
-        for dependency in &process.depends_on {
-            wait_ready(
-                dependency,
-                &mut ready,
-                &mut stats_sub,
-                &mut supervisor,
-                &interrupted,
-            )?;
+    for index in order {
+        let dependencies = stack.plan.launch.processes[index].depends_on.clone();
+        for dependency in &dependencies {
+            wait_ready(&mut stack, dependency)?;
         }
-        let mut child_env = env.clone();
-        child_env.extend(process.env.iter().map(|(k, v)| (k.clone(), v.clone())));
-        let log_path = args.out.join("logs").join(format!("{}.log", process.role));
-        let mut spec = ChildSpec::from_process(process, programs[&process.role].clone(), log_path);
-        spec.env = child_env;
-        supervisor
+        let process = &stack.plan.launch.processes[index];
+        let program = stack.plan.programs[&process.role].clone();
+        let mut spec = ChildSpec::from_process(process, program, log_of(args, &process.role));
+        let own = std::mem::take(&mut spec.env);
+        spec.env = stack.plan.env.iter().cloned().chain(own).collect();
+        stack
+            .supervisor
             .spawn(spec)
             .map_err(|e| Failure::run(e.to_string()))?;
     }
+    Ok(stack)
+}
 
-    let progress = progress_bar(ticks, args.quiet);
-    let mut exit_reason = None;
-    let mut world_done_at: Option<Instant> = None;
-    let mut failure = None;
-    // The newest step the monitor reported, and when it came.
-    let mut last_step: (u64, Instant) = (0, Instant::now());
-    while exit_reason.is_none() {
+/// The launcher's node in the stack's namespace and its ports: statistics and the monitor's
+/// status in, stack/processes and stack/control out.
+fn open_ports(args: &UpArgs, plan: &Plan, interrupted: Arc<AtomicBool>) -> Result<Ports, String> {
+    let common = CommonArgs {
+        namespace: args.namespace.clone(),
+        mode: plan.mode,
+        rate_hz: plan.launch.stack.rate_hz,
+        seed: Some(plan.seed),
+        takeover: false,
+    };
+    // The one sweep before the processes start (they do not sweep, see `Context::new`).
+    cleanup_dead_nodes();
+    let ctx = Context::with_shutdown_flag(LAUNCHER_NODE, &common, interrupted)
+        .map_err(|e| e.to_string())?;
+    let open = || -> Result<_, mole_runtime::RuntimeError> {
+        Ok((
+            ctx.subscriber(topics::STACK_STATS)?,
+            ctx.subscriber(topics::MONITOR_STATUS)?,
+            ctx.publisher(topics::STACK_PROCESSES)?,
+            ctx.control_server()?,
+        ))
+    };
+    let (stats, status, processes, control) = open().map_err(|e| e.to_string())?;
+    Ok(Ports {
+        ctx,
+        stats,
+        status,
+        processes,
+        control,
+    })
+}
+
+/// Serves `mole swap`, `mole stop` and `mole status`, restarts and reports, shows progress,
+/// until the run ends.
+fn supervise(stack: &mut Stack<'_>) -> RunEnd {
+    let mut last_report = Instant::now();
+    loop {
         std::thread::sleep(POLL);
-        stats_sub.drain(|s| record_stats(s, &mut last_heard, &mut ready, &mut collector));
-        if let Some(call) = control.receive() {
-            let request = *call.request();
-            match request.op {
-                CONTROL_STOP => {
-                    progress.suspend(|| tracing::info!("stop requested through stack/control"));
-                    exit_reason = Some(Some("stopped"));
-                    call.respond(|r| {
-                        write_name(
-                            &mut r.text,
-                            &format!("stopping the stack in namespace `{}`", args.namespace),
-                        );
-                    });
-                }
-                CONTROL_STATUS => {
-                    let tick = status_sub.latest().map_or(0, |s| s.header.tick);
-                    let line = status_line(&launch, &supervisor, mode, tick, ticks);
-                    call.respond(|r| write_name(&mut r.text, &line));
-                }
-                _ => {
-                    let mut on_stats =
-                        |s: &Stats| record_stats(s, &mut last_heard, &mut ready, &mut collector);
-                    let result =
-                        swap_spec(&launch, &supervisor, &request, &beside).and_then(|spec| {
-                            hot_swap(
-                                SwapEnv {
-                                    ctx: &ctx,
-                                    supervisor: &mut supervisor,
-                                    stats_sub: &mut stats_sub,
-                                    on_stats: &mut on_stats,
-                                    mode,
-                                    stop_timeout: Duration::from_millis(
-                                        launch.stack.shutdown_timeout_ms,
-                                    ),
-                                },
-                                spec,
-                            )
-                        });
-                    let line = match &result {
-                        Ok(report) => {
-                            swaps.push(swap_json(report));
-                            swap_sentence(report, mode)
-                        }
-                        Err(SwapError::Refused(why) | SwapError::Failed(why)) => why.clone(),
-                    };
-                    progress.suspend(|| match &result {
-                        Ok(_) => tracing::info!("{line}"),
-                        Err(_) => tracing::warn!("swap not done: {line}"),
-                    });
-                    call.respond(|r| write_swap_response(r, &result, &line));
-                    // The loop did not watch the steps during the swap.
-                    last_step.1 = Instant::now();
-                }
-            }
+        let watch = &mut stack.watch;
+        stack.ports.stats.drain(|s| watch.record(s));
+        if let Some(end) = serve_control(stack) {
+            return end;
         }
-        for role in hung_roles(&launch, &supervisor, &mut last_heard) {
-            *hangs.entry(role.clone()).or_insert(0) += 1;
-            let policy = launch.process(&role).map(|p| p.restart.policy);
-            if policy.is_some_and(|p| p != RestartWhen::Never)
-                && let Some(pid) = supervisor.pid(&role)
-            {
-                progress.suspend(|| {
+        restart_hung(stack);
+        if last_report.elapsed() >= Duration::from_secs(1) {
+            last_report = Instant::now();
+            publish_processes(stack);
+        }
+        if let Some(end) = follow_progress(stack) {
+            return end;
+        }
+        if let Some(end) = handle_events(stack) {
+            return end;
+        }
+        if stack.interrupted.load(Ordering::SeqCst) {
+            return RunEnd::Interrupted;
+        }
+        if stack
+            .watch
+            .world_done_at
+            .is_some_and(|t| t.elapsed() > FINISH_TIMEOUT)
+        {
+            tracing::warn!("the monitor did not finish within {FINISH_TIMEOUT:?}");
+            return RunEnd::Finished;
+        }
+    }
+}
+
+/// Answers one `stack/control` request, if one came; a stop request ends the run.
+fn serve_control(stack: &mut Stack<'_>) -> Option<RunEnd> {
+    let call = stack.ports.control.receive()?;
+    let request = *call.request();
+    match request.op {
+        CONTROL_STOP => {
+            stack
+                .progress
+                .suspend(|| tracing::info!("stop requested through stack/control"));
+            let text = format!("stopping the stack in namespace `{}`", stack.args.namespace);
+            call.respond(|r| write_name(&mut r.text, &text));
+            return Some(RunEnd::Stopped);
+        }
+        CONTROL_STATUS => {
+            let tick = stack.ports.status.latest().map_or(0, |s| s.header.tick);
+            let line = status_line(stack, tick);
+            call.respond(|r| write_name(&mut r.text, &line));
+        }
+        _ => {
+            let result = swap(stack, &request);
+            let line = match &result {
+                Ok(report) => {
+                    stack.watch.swaps.push(swap_record(report));
+                    swap_sentence(report, stack.plan.mode)
+                }
+                Err(SwapError::Refused(why) | SwapError::Failed(why)) => why.clone(),
+            };
+            stack.progress.suspend(|| match &result {
+                Ok(_) => tracing::info!("{line}"),
+                Err(_) => tracing::warn!("swap not done: {line}"),
+            });
+            call.respond(|r| write_swap_response(r, &result, &line));
+            // Supervision did not watch the steps during the swap.
+            stack.watch.last_step.1 = Instant::now();
+        }
+    }
+    None
+}
+
+/// Replaces a role's process as `request` asks, while the stack runs.
+fn swap(stack: &mut Stack<'_>, request: &ControlRequest) -> Result<SwapReport, SwapError> {
+    let spec = swap_spec(
+        &stack.plan.launch,
+        &stack.supervisor,
+        request,
+        &stack.plan.beside,
+    )?;
+    let watch = &mut stack.watch;
+    let mut on_stats = |s: &Stats| watch.record(s);
+    hot_swap(
+        SwapEnv {
+            ctx: &stack.ports.ctx,
+            supervisor: &mut stack.supervisor,
+            stats_sub: &mut stack.ports.stats,
+            on_stats: &mut on_stats,
+            mode: stack.plan.mode,
+            stop_timeout: Duration::from_millis(stack.plan.launch.stack.shutdown_timeout_ms),
+        },
+        spec,
+    )
+}
+
+/// Counts every hung role and kills it for a restart where its policy restarts it.
+fn restart_hung(stack: &mut Stack<'_>) {
+    for role in hung_roles(
+        &stack.plan.launch,
+        &stack.supervisor,
+        &mut stack.watch.last_heard,
+    ) {
+        *stack.watch.hangs.entry(role.clone()).or_insert(0) += 1;
+        let policy = stack.plan.launch.process(&role).map(|p| p.restart.policy);
+        match (policy, stack.supervisor.pid(&role)) {
+            (Some(p), Some(pid)) if p != RestartWhen::Never => {
+                stack.progress.suspend(|| {
                     tracing::warn!(
                         role,
                         "no statistics for {HANG_TIMEOUT:?}: hung, killing it for a restart"
@@ -377,170 +458,283 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
                     nix::unistd::Pid::from_raw(pid as i32),
                     nix::sys::signal::Signal::SIGKILL,
                 );
-            } else {
-                progress
-                    .suspend(|| tracing::warn!(role, "no statistics for {HANG_TIMEOUT:?}: hung"));
             }
-        }
-        if last_report.elapsed() >= Duration::from_secs(1) {
-            last_report = Instant::now();
-            publish_processes(&mut processes_pub, &launch, &supervisor, &gave_up);
-        }
-        status_sub.update();
-        if let Some(status) = status_sub.latest() {
-            progress.set_position(status.header.tick.min(ticks));
-            progress.set_message(format!(
-                "coverage {:>5.1}%  loop p50 {:.0} µs p99 {:.0} µs",
-                status.coverage * 100.0,
-                status.loop_p50_us,
-                status.loop_p99_us
-            ));
-            if status.finished == 1 {
-                exit_reason = Some(None);
-            }
-            if status.header.tick != last_step.0 {
-                last_step = (status.header.tick, Instant::now());
-            }
-        }
-        if mode == ClockMode::Lockstep
-            && world_done_at.is_none()
-            && exit_reason.is_none()
-            && last_step.1.elapsed() > STALL_TIMEOUT
-        {
-            let steps: Vec<String> = collector
-                .processes()
-                .iter()
-                .map(|p| format!("{} {}", p.role, p.steps))
-                .collect();
-            failure = Some(Failure::run(format!(
-                "the lockstep run stalled: no step for {STALL_TIMEOUT:?} after step {}; steps \
-                 handled per process: {} (see the logs in {})",
-                last_step.0,
-                steps.join(", "),
-                args.out.join("logs").display()
-            )));
-            exit_reason = Some(Some("stalled"));
-        }
-        for event in supervisor.poll() {
-            match event {
-                SupervisorEvent::Exited {
-                    role,
-                    status,
-                    expected,
-                } => {
-                    if role == "world" && status.success() {
-                        world_done_at.get_or_insert_with(Instant::now);
-                    } else if role == "monitor" && status.success() {
-                        exit_reason = Some(None);
-                    } else if !expected {
-                        progress.suspend(
-                            || tracing::warn!(role, %status, "process exited unexpectedly"),
-                        );
-                        // Release what the dead process held before its successor starts.
-                        cleanup_dead_nodes();
-                        let restarted = match launch.process(&role).map(|p| p.restart.policy) {
-                            Some(RestartWhen::Always) => true,
-                            Some(RestartWhen::OnFailure) => !status.success(),
-                            _ => false,
-                        };
-                        // Exit code 2 ends the run through GaveUp; anything else that no policy
-                        // restarts leaves the stack without the role: the run cannot go on.
-                        if !restarted && status != ExitStatus::Code(EXIT_BAD_INPUT) {
-                            let log = args.out.join("logs").join(format!("{role}.log"));
-                            failure = Some(Failure::run(format!(
-                                "`{role}` exited ({status}) and its restart policy does not \
-                                 restart it, so the run cannot go on (see {})",
-                                log.display()
-                            )));
-                            exit_reason = Some(Some("process_failed"));
-                        }
-                    }
-                }
-                SupervisorEvent::Restarted { role, attempt } => {
-                    progress.suspend(|| tracing::warn!(role, attempt, "process restarted"));
-                }
-                SupervisorEvent::RestartFailed { role, message } => {
-                    progress.suspend(|| tracing::warn!(role, "restart failed: {message}"));
-                }
-                SupervisorEvent::GaveUp { role } => {
-                    gave_up.insert(role.clone());
-                    let log = args.out.join("logs").join(format!("{role}.log"));
-                    failure = Some(
-                        if supervisor.last_exit(&role) == Some(ExitStatus::Code(EXIT_BAD_INPUT)) {
-                            Failure::input(format!(
-                                "`{role}` refused its input: {}",
-                                last_error_line(&log)
-                            ))
-                        } else {
-                            Failure::run(format!(
-                                "`{role}` kept failing and its restart policy gave up (see {})",
-                                log.display()
-                            ))
-                        },
-                    );
-                    exit_reason = Some(Some("process_failed"));
-                }
-            }
-        }
-        if interrupted.load(Ordering::SeqCst) {
-            exit_reason = Some(Some("interrupted"));
-        }
-        if world_done_at.is_some_and(|t| t.elapsed() > FINISH_TIMEOUT) {
-            tracing::warn!("the monitor did not finish within {FINISH_TIMEOUT:?}");
-            exit_reason = Some(None);
+            _ => stack
+                .progress
+                .suspend(|| tracing::warn!(role, "no statistics for {HANG_TIMEOUT:?}: hung")),
         }
     }
-    progress.finish_and_clear();
+}
 
-    // Stop the world first, so nothing new is produced; the monitor last, so it can still
-    // write its files (it does so on SIGTERM too).
-    let mut stopping: Vec<String> = stop_order(&launch.processes)
-        .unwrap_or_default()
-        .into_iter()
-        .map(|i| launch.processes[i].role.clone())
-        .collect();
-    if let Some(pos) = stopping.iter().position(|r| r == "monitor") {
-        let monitor = stopping.remove(pos);
-        stopping.push(monitor);
+/// Shows the monitor's progress; the run is over when the monitor says so, or stalled when a
+/// lockstep run makes no step for [`STALL_TIMEOUT`].
+fn follow_progress(stack: &mut Stack<'_>) -> Option<RunEnd> {
+    let ticks = stack.plan.ticks;
+    stack.ports.status.update();
+    if let Some(status) = stack.ports.status.latest() {
+        stack.progress.set_position(status.header.tick.min(ticks));
+        stack.progress.set_message(format!(
+            "coverage {:>5.1}%  loop p50 {:.0} µs p99 {:.0} µs",
+            status.coverage * 100.0,
+            status.loop_p50_us,
+            status.loop_p99_us
+        ));
+        if status.finished == 1 {
+            return Some(RunEnd::Finished);
+        }
+        if status.header.tick != stack.watch.last_step.0 {
+            stack.watch.last_step = (status.header.tick, Instant::now());
+        }
     }
-    let killed = supervisor.shutdown(
-        &stopping,
-        Duration::from_millis(launch.stack.shutdown_timeout_ms),
-    );
+    let (step, since) = stack.watch.last_step;
+    if stack.plan.mode != ClockMode::Lockstep
+        || stack.watch.world_done_at.is_some()
+        || since.elapsed() <= STALL_TIMEOUT
+    {
+        return None;
+    }
+    let steps: Vec<String> = stack
+        .watch
+        .collector
+        .processes()
+        .iter()
+        .map(|p| format!("{} {}", p.role, p.steps))
+        .collect();
+    Some(RunEnd::Stalled(Failure::run(format!(
+        "the lockstep run stalled: no step for {STALL_TIMEOUT:?} after step {step}; steps \
+         handled per process: {} (see the logs in {})",
+        steps.join(", "),
+        stack.args.out.join("logs").display()
+    ))))
+}
+
+/// Acts on what the supervisor saw: exits, restarts, roles it gave up on.
+fn handle_events(stack: &mut Stack<'_>) -> Option<RunEnd> {
+    let mut end = None;
+    for event in stack.supervisor.poll() {
+        let this = match event {
+            SupervisorEvent::Exited {
+                role,
+                status,
+                expected,
+            } => on_exit(stack, &role, status, expected),
+            SupervisorEvent::Restarted { role, attempt } => {
+                stack
+                    .progress
+                    .suspend(|| tracing::warn!(role, attempt, "process restarted"));
+                None
+            }
+            SupervisorEvent::RestartFailed { role, message } => {
+                stack
+                    .progress
+                    .suspend(|| tracing::warn!(role, "restart failed: {message}"));
+                None
+            }
+            SupervisorEvent::GaveUp { role } => Some(gave_up(stack, role)),
+        };
+        end = end.or(this);
+    }
+    end
+}
+
+/// A process exited: the world's clean end, the monitor's (the run is over), or a failure its
+/// restart policy mends or not.
+fn on_exit(
+    stack: &mut Stack<'_>,
+    role: &str,
+    status: ExitStatus,
+    expected: bool,
+) -> Option<RunEnd> {
+    let graph_role = role.parse::<Role>().ok();
+    if status.success() && graph_role == Some(Role::World) {
+        stack.watch.world_done_at.get_or_insert_with(Instant::now);
+        return None;
+    }
+    if status.success() && graph_role == Some(Role::Monitor) {
+        return Some(RunEnd::Finished);
+    }
+    if expected {
+        return None;
+    }
+    stack
+        .progress
+        .suspend(|| tracing::warn!(role, %status, "process exited unexpectedly"));
+    // Release what the dead process held before its successor starts.
+    cleanup_dead_nodes();
+    let restarted = match stack.plan.launch.process(role).map(|p| p.restart.policy) {
+        Some(RestartWhen::Always) => true,
+        Some(RestartWhen::OnFailure) => !status.success(),
+        _ => false,
+    };
+    // Exit code 2 ends the run through GaveUp; anything else that no policy restarts leaves the
+    // stack without the role: the run cannot go on.
+    if restarted || status == ExitStatus::Code(EXIT_BAD_INPUT) {
+        return None;
+    }
+    Some(RunEnd::ProcessFailed(Failure::run(format!(
+        "`{role}` exited ({status}) and its restart policy does not restart it, so the run \
+         cannot go on (see {})",
+        log_of(stack.args, role).display()
+    ))))
+}
+
+/// The supervisor gave up on a role: the run cannot go on.
+fn gave_up(stack: &mut Stack<'_>, role: String) -> RunEnd {
+    let failure = gave_up_failure(stack, &role);
+    stack.watch.gave_up.insert(role);
+    RunEnd::ProcessFailed(failure)
+}
+
+/// Why the supervisor gave up on `role`: its own refusal of its input (exit 2, its error line
+/// shown), or failures beyond its restart policy.
+fn gave_up_failure(stack: &Stack<'_>, role: &str) -> Failure {
+    let log = log_of(stack.args, role);
+    if stack.supervisor.last_exit(role) == Some(ExitStatus::Code(EXIT_BAD_INPUT)) {
+        Failure::input(format!(
+            "`{role}` refused its input: {}",
+            last_error_line(&log)
+        ))
+    } else {
+        Failure::run(format!(
+            "`{role}` kept failing and its restart policy gave up (see {})",
+            log.display()
+        ))
+    }
+}
+
+fn log_of(args: &UpArgs, role: &str) -> PathBuf {
+    args.out.join("logs").join(format!("{role}.log"))
+}
+
+/// Stops the stack in the graph's order, releases the launcher's ports, completes summary.json.
+fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
+    let Stack {
+        args,
+        plan,
+        ports,
+        mut supervisor,
+        watch,
+        progress,
+        started,
+        ..
+    } = stack;
+    progress.finish_and_clear();
+    let stopping: Vec<String> = stop_order(&plan.launch.processes)
+        .into_iter()
+        .map(|i| plan.launch.processes[i].role.clone())
+        .collect();
+    let timeout = Duration::from_millis(plan.launch.stack.shutdown_timeout_ms);
+    let killed = supervisor.shutdown(&stopping, timeout);
     if !killed.is_empty() {
         tracing::warn!(?killed, "needed SIGKILL");
     }
-    drop(control);
-    drop(stats_sub);
-    drop(processes_pub);
-    drop(status_sub);
-    drop(ctx);
+    drop(ports);
     cleanup_dead_nodes();
 
-    let restarts = supervisor.restarts();
     let summary_path = args.out.join("summary.json");
-    let reason = exit_reason.flatten();
+    let exit_reason = end.exit_reason();
+    let failure = end.into_failure();
     if !summary_path.exists()
         && let Some(failure) = failure
     {
         // The run failed before the monitor could write anything: the failure is the news.
         return Err(failure);
     }
-    finish_summary(
-        &summary_path,
-        &restarts,
-        &hangs,
-        &swaps,
-        reason,
-        started.elapsed().as_secs_f64(),
-    )?;
-    report(&summary_path, &args.out);
+    let mut summary = read_summary(&summary_path).map_err(|e| {
+        Failure::run(format!(
+            "the monitor wrote no readable summary at {}: {e}",
+            summary_path.display()
+        ))
+    })?;
+    summary.restarts = supervisor.restarts();
+    summary.hangs = watch.hangs;
+    summary.swaps = watch.swaps;
+    if let Some(reason) = exit_reason {
+        summary.exit_reason = reason.to_owned();
+    }
+    summary.launcher_wall_time_s = Some(started.elapsed().as_secs_f64());
+    write_summary(&summary, &summary_path)
+        .map_err(|e| Failure::run(format!("cannot complete {}: {e}", summary_path.display())))?;
+    report(&summary, &args.out);
     match failure {
         Some(failure) => Err(failure),
         None => Ok(RunOutcome {
             summary_path,
-            stats: collector,
+            summary,
+            stats: watch.collector,
         }),
+    }
+}
+
+/// The line `mole up` prints at the end.
+fn report(s: &Summary, out: &Path) {
+    let p50 = s
+        .loop_latency_us
+        .p50
+        .map_or("-".to_owned(), |v| format!("{v:.0}"));
+    println!(
+        "{} ticks ({}), coverage {:.1}%, loop latency p50 {p50} µs, max penetration {} m, exit: {} → {}",
+        s.ticks,
+        s.mode,
+        s.coverage * 100.0,
+        s.max_penetration_m,
+        s.exit_reason,
+        out.display()
+    );
+}
+
+fn swap_record(report: &SwapReport) -> SwapRecord {
+    SwapRecord {
+        role: report.role.clone(),
+        old_pid: report.old_pid,
+        pid: report.pid,
+        tick: report.tick,
+        topic: report.topic.to_owned(),
+        gap_ms: report.gap.as_secs_f64() * 1e3,
+        median_interval_ms: report.period.as_secs_f64() * 1e3,
+        ticks_observed: report.ticks_observed,
+        steps_lost: report.steps_lost,
+        steps_repeated: report.steps_repeated,
+        killed_old: report.killed_old,
+        duration_s: report.duration.as_secs_f64(),
+    }
+}
+
+/// Publishes every role's state and restarts on stack/processes (for `mole top`).
+fn publish_processes(stack: &mut Stack<'_>) {
+    use mole_types::{
+        MAX_PROCESSES, PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, PROCESS_RUNNING,
+        PROCESS_STARTING,
+    };
+    let (launch, supervisor, gave_up) =
+        (&stack.plan.launch, &stack.supervisor, &stack.watch.gave_up);
+    let restarts = supervisor.restarts();
+    let result = stack
+        .ports
+        .processes
+        .publish(0, mole_runtime::now_ns(), |m| {
+            let n = launch.processes.len().min(MAX_PROCESSES);
+            m.n_processes = n as u32;
+            for (slot, process) in m.processes.iter_mut().zip(&launch.processes).take(n) {
+                write_name(&mut slot.role, &process.role);
+                slot.pid = supervisor.pid(&process.role).unwrap_or(0);
+                slot.state = if gave_up.contains(&process.role) {
+                    PROCESS_FAILED
+                } else if supervisor.is_running(&process.role) {
+                    PROCESS_RUNNING
+                } else if supervisor.restart_pending(&process.role) {
+                    PROCESS_RESTARTING
+                } else if supervisor.last_exit(&process.role).is_some() {
+                    PROCESS_EXITED
+                } else {
+                    PROCESS_STARTING
+                };
+                slot.restarts = restarts.get(&process.role).copied().unwrap_or(0);
+                slot._pad = 0;
+            }
+        });
+    if let Err(e) = result {
+        tracing::debug!("cannot publish stack/processes: {e}");
     }
 }
 
@@ -588,19 +782,6 @@ fn swap_spec(
     spec.args = arguments.to_vec();
     spec.cwd = Some(cwd);
     Ok(spec)
-}
-
-/// A process's statistics sample: it is alive (hang detection), ready, and counted.
-fn record_stats(
-    s: &Stats,
-    last_heard: &mut BTreeMap<String, Instant>,
-    ready: &mut BTreeSet<String>,
-    collector: &mut StatsCollector,
-) {
-    let role = read_name(&s.process).into_owned();
-    last_heard.insert(role.clone(), Instant::now());
-    ready.insert(role);
-    collector.record(s);
 }
 
 /// The answer to `mole swap`: its status, what the swap measured, and `line`.
@@ -652,31 +833,9 @@ fn swap_sentence(report: &SwapReport, mode: ClockMode) -> String {
     line
 }
 
-fn swap_json(report: &SwapReport) -> serde_json::Value {
-    serde_json::json!({
-        "role": report.role,
-        "old_pid": report.old_pid,
-        "pid": report.pid,
-        "tick": report.tick,
-        "topic": report.topic,
-        "gap_ms": report.gap.as_secs_f64() * 1e3,
-        "median_interval_ms": report.period.as_secs_f64() * 1e3,
-        "ticks_observed": report.ticks_observed,
-        "steps_lost": report.steps_lost,
-        "steps_repeated": report.steps_repeated,
-        "killed_old": report.killed_old,
-        "duration_s": report.duration.as_secs_f64(),
-    })
-}
-
 /// `mole status`'s line: where the run is and every role's pid, state and restarts.
-fn status_line(
-    launch: &LaunchFile,
-    supervisor: &Supervisor,
-    mode: ClockMode,
-    tick: u64,
-    ticks: u64,
-) -> String {
+fn status_line(stack: &Stack<'_>, tick: u64) -> String {
+    let (launch, supervisor) = (&stack.plan.launch, &stack.supervisor);
     let restarts = supervisor.restarts();
     let roles: Vec<String> = launch
         .processes
@@ -691,12 +850,12 @@ fn status_line(
             format!("{} ({state}, {n} restarts)", p.role)
         })
         .collect();
-    let of = if ticks == u64::MAX {
+    let of = if stack.plan.ticks == u64::MAX {
         String::new()
     } else {
-        format!(" of {ticks}")
+        format!(" of {}", stack.plan.ticks)
     };
-    format!("{mode}, tick {tick}{of}: {}", roles.join(", "))
+    format!("{}, tick {tick}{of}: {}", stack.plan.mode, roles.join(", "))
 }
 
 /// Roles that are running, were heard from, and have been silent for [`HANG_TIMEOUT`]; each is
@@ -732,125 +891,23 @@ fn last_error_line(log: &Path) -> String {
         .unwrap_or_else(|| format!("see {}", log.display()))
 }
 
-/// Publishes every role's state and restarts on stack/processes (for `mole top`).
-fn publish_processes(
-    publisher: &mut mole_runtime::Publisher<mole_types::Processes>,
-    launch: &LaunchFile,
-    supervisor: &Supervisor,
-    gave_up: &BTreeSet<String>,
-) {
-    use mole_types::{
-        MAX_PROCESSES, PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, PROCESS_RUNNING,
-        PROCESS_STARTING,
-    };
-    let restarts = supervisor.restarts();
-    let result = publisher.publish(0, mole_runtime::now_ns(), |m| {
-        let n = launch.processes.len().min(MAX_PROCESSES);
-        m.n_processes = n as u32;
-        for (slot, process) in m.processes.iter_mut().zip(&launch.processes).take(n) {
-            mole_types::write_name(&mut slot.role, &process.role);
-            slot.pid = supervisor.pid(&process.role).unwrap_or(0);
-            slot.state = if gave_up.contains(&process.role) {
-                PROCESS_FAILED
-            } else if supervisor.is_running(&process.role) {
-                PROCESS_RUNNING
-            } else if supervisor.restart_pending(&process.role) {
-                PROCESS_RESTARTING
-            } else if supervisor.last_exit(&process.role).is_some() {
-                PROCESS_EXITED
-            } else {
-                PROCESS_STARTING
-            };
-            slot.restarts = restarts.get(&process.role).copied().unwrap_or(0);
-            slot._pad = 0;
-        }
-    });
-    if let Err(e) = result {
-        tracing::debug!("cannot publish stack/processes: {e}");
-    }
-}
-
-fn child_env(
-    args: &UpArgs,
-    launch: &LaunchFile,
-    scenario: &Path,
-    ticks: u64,
-    seed: u64,
-) -> Vec<(String, String)> {
-    let absolute = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
-    let mut env = vec![
-        ("MOLE_NAMESPACE".to_string(), args.namespace.clone()),
-        ("MOLE_MODE".to_string(), launch.stack.mode.to_string()),
-        ("MOLE_RATE_HZ".to_string(), launch.stack.rate_hz.to_string()),
-        (
-            "MOLE_SCENARIO".to_string(),
-            absolute(scenario).display().to_string(),
-        ),
-        ("MOLE_TICKS".to_string(), ticks.to_string()),
-        ("MOLE_PLANNER".to_string(), launch.stack.planner.clone()),
-        ("MOLE_ESTIMATOR".to_string(), launch.stack.estimator.clone()),
-        (
-            "MOLE_OUT".to_string(),
-            absolute(&args.out).display().to_string(),
-        ),
-    ];
-    env.push(("MOLE_SEED".to_string(), seed.to_string()));
-    // Exploring planners ignore the scenario's goal, so passing it must not end their run.
-    if matches!(launch.stack.planner.as_str(), "random-walk" | "frontier") {
-        env.push(("MOLE_NO_STOP_AT_GOAL".to_string(), "true".to_string()));
-    }
-    if let Some((x, y)) = args.goal {
-        env.push(("MOLE_GOAL".to_string(), format!("{x},{y}")));
-    }
-    if let Some(local) = &args.local_planner {
-        env.push(("MOLE_LOCAL_PLANNER".to_string(), local.clone()));
-    }
-    env
-}
-
-fn prepare_out_dir(out: &Path) -> Result<(), Failure> {
-    let failed = |e: std::io::Error| {
-        Failure::input(format!(
-            "cannot use the output directory {}: {e}",
-            out.display()
-        ))
-    };
-    std::fs::create_dir_all(out.join("logs")).map_err(failed)?;
-    for stale in ["summary.json", "map.png"] {
-        let path = out.join(stale);
-        if path.exists() {
-            std::fs::remove_file(&path).map_err(failed)?;
-        }
-    }
-    if let Ok(entries) = std::fs::read_dir(out.join("logs")) {
-        for entry in entries.flatten() {
-            let _ = std::fs::remove_file(entry.path());
-        }
-    }
-    Ok(())
-}
-
-fn wait_ready(
-    role: &str,
-    ready: &mut BTreeSet<String>,
-    stats_sub: &mut mole_runtime::Subscriber<mole_types::Stats>,
-    supervisor: &mut Supervisor,
-    interrupted: &AtomicBool,
-) -> Result<(), Failure> {
+/// Waits until `role` announced its ports (its first `stack/stats`).
+fn wait_ready(stack: &mut Stack<'_>, role: &str) -> Result<(), Failure> {
     let deadline = Instant::now() + READY_TIMEOUT;
     loop {
-        stats_sub.drain(|s| {
+        let ready = &mut stack.watch.ready;
+        stack.ports.stats.drain(|s| {
             ready.insert(read_name(&s.process).into_owned());
         });
-        if ready.contains(role) {
+        if stack.watch.ready.contains(role) {
             return Ok(());
         }
-        for event in supervisor.poll() {
-            if let SupervisorEvent::GaveUp { role: r } = event {
-                return Err(Failure::run(format!("`{r}` failed while starting")));
+        for event in stack.supervisor.poll() {
+            if let SupervisorEvent::GaveUp { role } = event {
+                return Err(gave_up_failure(stack, &role));
             }
         }
-        if interrupted.load(Ordering::SeqCst) {
+        if stack.interrupted.load(Ordering::SeqCst) {
             return Err(Failure::run("interrupted while starting"));
         }
         if Instant::now() > deadline {
@@ -874,61 +931,4 @@ fn progress_bar(ticks: u64, quiet: bool) -> ProgressBar {
     }
     bar.enable_steady_tick(Duration::from_millis(200));
     bar
-}
-
-/// Adds what only the launcher knows (restarts, why the run ended, its wall time) to the
-/// monitor's summary.json.
-fn finish_summary(
-    path: &Path,
-    restarts: &BTreeMap<String, u32>,
-    hangs: &BTreeMap<String, u32>,
-    swaps: &[serde_json::Value],
-    reason: Option<&str>,
-    launcher_wall_s: f64,
-) -> Result<(), Failure> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        Failure::run(format!(
-            "the monitor wrote no summary at {}: {e}",
-            path.display()
-        ))
-    })?;
-    let mut summary: serde_json::Value = serde_json::from_str(&text)
-        .map_err(|e| Failure::run(format!("{} is not valid JSON: {e}", path.display())))?;
-    if let Some(object) = summary.as_object_mut() {
-        object.insert(
-            "hangs".into(),
-            serde_json::to_value(hangs).unwrap_or_default(),
-        );
-        object.insert("swaps".into(), swaps.to_vec().into());
-        object.insert(
-            "restarts".into(),
-            serde_json::to_value(restarts).unwrap_or_default(),
-        );
-        if let Some(reason) = reason {
-            object.insert("exit_reason".into(), reason.into());
-        }
-        object.insert("launcher_wall_time_s".into(), launcher_wall_s.into());
-    }
-    let text = serde_json::to_string_pretty(&summary).map_err(|e| Failure::run(e.to_string()))?;
-    std::fs::write(path, text + "\n")
-        .map_err(|e| Failure::run(format!("cannot write {}: {e}", path.display())))
-}
-
-fn report(summary_path: &Path, out: &Path) {
-    let Ok(text) = std::fs::read_to_string(summary_path) else {
-        return;
-    };
-    let Ok(s) = serde_json::from_str::<serde_json::Value>(&text) else {
-        return;
-    };
-    println!(
-        "{} ticks ({}), coverage {:.1}%, loop latency p50 {} µs, max penetration {} m, exit: {} → {}",
-        s["ticks"],
-        s["mode"].as_str().unwrap_or("?"),
-        s["coverage"].as_f64().unwrap_or(0.0) * 100.0,
-        s["loop_latency_us"]["p50"],
-        s["max_penetration_m"],
-        s["exit_reason"].as_str().unwrap_or("?"),
-        out.display()
-    );
 }

@@ -1,6 +1,7 @@
 //! What every integration test needs: the built binaries, a unique namespace, a `mole up` that
 //! is killed with all its children whatever happens, and a check that nothing is left behind.
 
+pub use mole_monitor::Summary;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::{Mutex, MutexGuard};
@@ -29,15 +30,8 @@ pub fn bin_dir() -> PathBuf {
         .and_then(Path::parent)
         .expect("target/<profile>")
         .to_path_buf();
-    for name in [
-        "mole",
-        "mole-world",
-        "mole-sensing",
-        "mole-localization",
-        "mole-mapping",
-        "mole-planning",
-        "mole-monitor",
-    ] {
+    let programs = mole_types::GRAPH.iter().map(|r| r.program);
+    for name in std::iter::once("mole").chain(programs) {
         assert!(
             dir.join(name).exists(),
             "{} is missing: run the README's test command (it builds every binary first)",
@@ -76,7 +70,7 @@ pub fn shm_files() -> Vec<String> {
 
 /// PIDs of live processes started for `namespace` (their environment names it).
 pub fn processes_of(namespace: &str) -> Vec<u32> {
-    let needle = format!("MOLE_NAMESPACE={namespace}");
+    let needle = format!("{}={namespace}", mole_types::env::NAMESPACE);
     let mut pids = Vec::new();
     let Ok(entries) = std::fs::read_dir("/proc") else {
         return pids;
@@ -218,7 +212,7 @@ pub fn mole_command(namespace: &str, out: &Path, args: &[&str]) -> Command {
     let mut command = Command::new(bin_dir().join("mole"));
     command
         .current_dir(workspace())
-        .env("MOLE_NAMESPACE", namespace)
+        .env(mole_types::env::NAMESPACE, namespace)
         .env_remove("CARGO")
         .env_remove("CARGO_MANIFEST_DIR")
         .arg("up")
@@ -263,12 +257,11 @@ pub fn logs(out: &Path) -> String {
     text
 }
 
-/// Reads a run's summary.json.
-pub fn summary(out: &Path) -> serde_json::Value {
+/// Reads a run's summary.json into the schema the monitor and the launcher write.
+pub fn summary(out: &Path) -> Summary {
     let path = out.join("summary.json");
-    let text = std::fs::read_to_string(&path)
-        .unwrap_or_else(|e| panic!("no summary at {}: {e}\n{}", path.display(), logs(out)));
-    serde_json::from_str(&text).expect("summary.json is JSON")
+    mole_monitor::read_summary(&path)
+        .unwrap_or_else(|e| panic!("no summary at {}: {e}\n{}", path.display(), logs(out)))
 }
 
 fn copy_dir(from: &Path, to: &Path) {
@@ -321,6 +314,7 @@ pub fn join_realtime_stack(namespace: &str, role: &str) -> mole_runtime::Context
         mode: mole_runtime::ClockMode::Realtime,
         rate_hz: 100.0,
         seed: None,
+        takeover: false,
     };
     let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     mole_runtime::Context::with_shutdown_flag(role, &args, shutdown)

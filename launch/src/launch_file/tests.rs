@@ -1,4 +1,5 @@
 use super::*;
+use mole_types::GRAPH;
 use proptest::prelude::*;
 
 const VALID: &str = r#"[stack]
@@ -47,7 +48,7 @@ fn err(text: &str) -> String {
 #[test]
 fn valid_file_parses_with_defaults() {
     let lf = parse(VALID).unwrap();
-    assert_eq!(lf.stack.mode, Mode::Realtime);
+    assert_eq!(lf.stack.mode, ClockMode::Realtime);
     assert_eq!(lf.stack.rate_hz, 100.0);
     assert_eq!(lf.stack.ticks, Some(3000));
     assert_eq!(lf.stack.duration_s, None);
@@ -155,7 +156,7 @@ fn bad_mode() {
         "{msg}"
     );
     assert!(
-        msg.contains("unknown variant `fast`, expected `realtime` or `lockstep`"),
+        msg.ends_with("unknown clock mode `fast`, expected one of: realtime, lockstep"),
         "{msg}"
     );
 }
@@ -202,12 +203,13 @@ fn empty_command_and_bad_role() {
         "{msg}"
     );
     let msg = err(&VALID.replace("role = \"planning\"", "role = \"plan ning\""));
-    assert!(
-        msg.contains("field `process[1].role`: invalid role `plan ning`"),
-        "{msg}"
+    assert_eq!(
+        msg,
+        "launch/stacks/x.toml:16:8: field `process[1].role`: unknown role `plan ning`, expected \
+         one of: world, sensing, localization, mapping, planning, monitor"
     );
     let msg = err(&VALID.replace("role = \"planning\"", "role = \"../x\""));
-    assert!(msg.contains("invalid role"), "{msg}");
+    assert!(msg.contains("unknown role `../x`"), "{msg}");
 }
 
 #[test]
@@ -269,17 +271,15 @@ fn overrides_replace_the_run_length() {
     let mut stack = parse(VALID).unwrap().stack;
     StackOverrides {
         duration_s: Some(4.0),
-        planner: Some("apf".to_owned()),
-        mode: Some(Mode::Lockstep),
+        planner: Some(PlannerKind::Apf),
+        mode: Some(ClockMode::Lockstep),
         ..Default::default()
     }
     .apply(&mut stack);
     assert_eq!((stack.ticks, stack.duration_s), (None, Some(4.0)));
-    assert_eq!(stack.planner, "apf");
-    assert_eq!(stack.mode, Mode::Lockstep);
-    assert_eq!(stack.estimator, "ekf");
-    assert_eq!("lockstep".parse::<Mode>(), Ok(Mode::Lockstep));
-    assert!("x".parse::<Mode>().is_err());
+    assert_eq!(stack.planner, PlannerKind::Apf);
+    assert_eq!(stack.mode, ClockMode::Lockstep);
+    assert_eq!(stack.estimator, EstimatorKind::Ekf);
 }
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -333,45 +333,72 @@ fn data_paths_resolve_cwd_first_then_up_to_the_workspace_root() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// The shipped stacks run every role of the graph with its program, the world never restarted
+/// and started after every role that reads what it writes, so no step goes unheard.
 #[test]
-fn shipped_stacks_load() {
+fn shipped_stacks_are_the_graph() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("stacks");
     for (name, mode, ticks) in [
-        ("default.toml", Mode::Realtime, 3000),
-        ("lockstep.toml", Mode::Lockstep, 5000),
+        ("default.toml", ClockMode::Realtime, 3000),
+        ("lockstep.toml", ClockMode::Lockstep, 5000),
     ] {
         let lf = load_launch_file(&dir.join(name)).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(lf.stack.mode, mode);
         assert_eq!(lf.stack.ticks, Some(ticks));
         assert_eq!(lf.stack.rate_hz, 100.0);
-        assert_eq!(lf.stack.planner, "random-walk");
-        assert_eq!(lf.stack.estimator, "ekf");
+        assert_eq!(lf.stack.planner, PlannerKind::RandomWalk);
+        assert_eq!(lf.stack.estimator, EstimatorKind::Ekf);
         assert_eq!(
             lf.stack.scenario.as_deref(),
             Some(Path::new("scenarios/default.toml"))
         );
-        let roles = [
-            "world",
-            "sensing",
-            "localization",
-            "mapping",
-            "planning",
-            "monitor",
-        ];
-        assert_eq!(lf.roles(), roles);
+        let roles: Vec<&str> = GRAPH.iter().map(|r| r.role.name()).collect();
+        assert_eq!(lf.roles(), roles, "{name}");
         for p in &lf.processes {
-            assert_eq!(p.command, format!("mole-{}", p.role));
-            if p.role == "world" {
+            let spec = mole_types::graph::spec(&p.role).expect("a graph role");
+            assert_eq!(p.command, spec.program, "{name}");
+            if spec.role == Role::World {
                 assert_eq!(p.restart.policy, RestartWhen::Never);
-                assert_eq!(p.depends_on, roles[1..]);
             } else {
                 assert_eq!(p.restart.policy, RestartWhen::OnFailure);
                 assert_eq!(p.restart.max, 5);
             }
         }
         let order = crate::start_order(&lf.processes).unwrap();
-        assert_eq!(lf.processes[*order.last().unwrap()].role, "world");
+        let started = |role: Role| {
+            order
+                .iter()
+                .position(|&i| lf.processes[i].role == role.name())
+                .unwrap()
+        };
+        let world = Role::World.spec();
+        for reader in GRAPH.iter().filter(|r| r.role != Role::World) {
+            if reader.inputs.iter().any(|t| world.outputs.contains(t)) {
+                assert!(
+                    started(reader.role) < started(Role::World),
+                    "{name}: {}",
+                    reader.role
+                );
+            }
+        }
     }
+}
+
+/// A planner or estimator the stack does not have is refused naming every valid one.
+#[test]
+fn unknown_planner_and_estimator_name_the_choices() {
+    let msg = err(&VALID.replace("\"random-walk\"", "\"teleport\""));
+    assert_eq!(
+        msg,
+        "launch/stacks/x.toml:6:11: field `stack.planner`: unknown planner `teleport`, expected \
+         one of: random-walk, apf, dwa, frontier"
+    );
+    let msg = err(&VALID.replace("\"ekf\"", "\"oracle\""));
+    assert!(
+        msg.contains("field `stack.estimator`: unknown estimator `oracle`"),
+        "{msg}"
+    );
+    assert!(msg.ends_with(&EstimatorKind::NAMES.join(", ")), "{msg}");
 }
 
 proptest! {
