@@ -238,15 +238,7 @@ pub struct Process {
 impl Process {
     /// The process `role` in the stack the arguments name (see [`Context::new`]).
     pub fn new(role: &str, args: &CommonArgs) -> Result<Process, RuntimeError> {
-        let ctx = Context::new(role, args)?;
-        Ok(Process {
-            map: ctx.subscriber(topics::WORLD_MAP)?,
-            ctx,
-            ports: Vec::new(),
-            trigger: None,
-            wakers: Vec::new(),
-            resume_after: None,
-        })
+        Self::on(Context::new(role, args)?)
     }
 
     /// As [`Process::new`], for a caller that owns its signal handling (tests, tools).
@@ -255,7 +247,10 @@ impl Process {
         args: &CommonArgs,
         shutdown: std::sync::Arc<std::sync::atomic::AtomicBool>,
     ) -> Result<Process, RuntimeError> {
-        let ctx = Context::with_shutdown_flag(role, args, shutdown)?;
+        Self::on(Context::with_shutdown_flag(role, args, shutdown)?)
+    }
+
+    fn on(ctx: Context) -> Result<Process, RuntimeError> {
         Ok(Process {
             map: ctx.subscriber(topics::WORLD_MAP)?,
             ctx,
