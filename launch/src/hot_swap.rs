@@ -3,7 +3,7 @@
 //! Make before break. The new process starts beside the old one and reads the same inputs; once
 //! it announces its first handled step (its first `stack/stats` sample with `steps > 0`), the old
 //! one gets SIGTERM. Inputs are never unread, so in lockstep no step is lost; every consumer
-//! handles each tick once ([`mole_runtime::StepGate`]), so the overlap repeats none. The
+//! handles each tick once (the runtime's step loop), so the overlap repeats none. The
 //! launcher watches the role's output topic, world/truth and the outputs of the processes that
 //! read the role's output during the swap, and reports how many ticks it observed, the longest
 //! silence and, in lockstep, any lost step and any step a consumer handled twice.

@@ -1,4 +1,5 @@
-//! The two clock modes and the rule that decides when a process handles a step.
+//! The two clock modes (declared in `mole_types::kinds`) and the parsing of points from the
+//! command line. When a process handles a step is decided by the step loop (`step.rs`).
 
 pub use mole_types::ClockMode;
 
@@ -11,76 +12,9 @@ pub fn parse_point(text: &str) -> Result<(f64, f64), String> {
     parsed.ok_or_else(|| format!("expected X,Y in metres (e.g. 8.5,9), found `{text}`"))
 }
 
-/// Decides whether a step is due from the ticks of a process's inputs.
-///
-/// The first input is the trigger. Realtime: a step is due whenever the trigger carries a tick
-/// not handled yet; the other inputs are used as they are (newest). Lockstep: a step is due when
-/// every input carries the same tick k and k was not handled yet.
-#[derive(Debug, Clone)]
-pub struct StepGate {
-    mode: ClockMode,
-    last: Option<u64>,
-}
-
-impl StepGate {
-    pub fn new(mode: ClockMode) -> Self {
-        Self { mode, last: None }
-    }
-
-    /// The tick to handle now, if any; marks it handled.
-    #[must_use]
-    pub fn ready(&mut self, ticks: &[Option<u64>]) -> Option<u64> {
-        let k = (*ticks.first()?)?;
-        if self.last.is_some_and(|last| k <= last) {
-            return None;
-        }
-        if self.mode == ClockMode::Lockstep && ticks.iter().any(|t| *t != Some(k)) {
-            return None;
-        }
-        self.last = Some(k);
-        Some(k)
-    }
-
-    /// Treats every tick up to `tick` as handled: a replacement resumes after the last step
-    /// of the process it took over from.
-    pub fn resume_after(&mut self, tick: u64) {
-        self.last = Some(tick);
-    }
-
-    /// The last tick handled.
-    pub fn last(&self) -> Option<u64> {
-        self.last
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn lockstep_waits_for_every_input_of_the_same_tick() {
-        let mut gate = StepGate::new(ClockMode::Lockstep);
-        assert_eq!(gate.ready(&[Some(0), None]), None);
-        assert_eq!(gate.ready(&[Some(0), Some(1)]), None);
-        assert_eq!(gate.ready(&[Some(0), Some(0)]), Some(0));
-        assert_eq!(
-            gate.ready(&[Some(0), Some(0)]),
-            None,
-            "a tick is handled once"
-        );
-        assert_eq!(gate.ready(&[Some(1), Some(0)]), None);
-        assert_eq!(gate.ready(&[Some(1), Some(1)]), Some(1));
-    }
-
-    #[test]
-    fn realtime_steps_on_every_new_trigger() {
-        let mut gate = StepGate::new(ClockMode::Realtime);
-        assert_eq!(gate.ready(&[None, Some(3)]), None);
-        assert_eq!(gate.ready(&[Some(5), None]), Some(5));
-        assert_eq!(gate.ready(&[Some(5), Some(9)]), None);
-        assert_eq!(gate.ready(&[Some(7), Some(2)]), Some(7));
-        assert_eq!(gate.last(), Some(7));
-    }
 
     #[test]
     fn points_parse_and_bad_ones_are_named() {

@@ -1,8 +1,10 @@
 //! The one place in mole that touches iceoryx2.
 //!
-//! A process main reads as a sentence: [`Context`] (node bound to a namespace) → typed
-//! [`Publisher`] / [`Subscriber`] from a topic constant → [`WaitSet`] that sleeps until data, a
-//! deadline or a shutdown → [`StepGate`] that decides, per clock mode, whether a step is due.
+//! A process main reads as its dataflow: [`Process`] (its node in a namespace) → a trigger and
+//! inputs, each read by a [`Rule`] → outputs ([`Publisher`], written in place) → `run` with the
+//! algorithm's `init` and `step`; the runtime waits, gates each step by the clock mode, joins a
+//! run under way and takes over. Underneath: [`Context`], typed [`Subscriber`]s and a
+//! [`WaitSet`] that sleeps until data, a deadline or a shutdown.
 //!
 //! - Every publish also signals the topic's event service, so subscribers sleep in a WaitSet:
 //!   no busy loops, no sleep-polling.
@@ -30,7 +32,7 @@ mod waitset;
 
 pub use admin::{HALF_MADE_AGE, cleanup_dead_nodes, list_topics, live_nodes_in_namespace};
 pub use alloc_counter::{CountingAllocator, allocations_during};
-pub use clock::{ClockMode, StepGate, parse_point};
+pub use clock::{ClockMode, parse_point};
 pub use context::{CommonArgs, Context, STUCK_CONSUMER};
 pub use control::{ControlCall, ControlClient, ControlServer};
 pub use error::{BadInput, RuntimeError, exit_code};
