@@ -79,7 +79,7 @@ pub fn cleanup_dead_nodes() -> usize {
     let half_made = half_made_segments
         + remove_half_made_nodes(&nodes_dir, &config.global.prefix, &listed)
         + remove_half_made_services(config)
-        + remove_orphaned_listener_events(config);
+        + remove_orphaned_port_segments(config);
     if half_made > 0 {
         tracing::info!(
             half_made,
@@ -152,12 +152,13 @@ fn remove_half_made_shared_memory(config: &Config) -> usize {
     half_made.len()
 }
 
-/// Removes the events (shared memory named after their listener port) of listeners that no
-/// node has any more, once old enough. A listener's port tag is made before its event, and
-/// iceoryx2 removes a listener's event when it removes the listener from its service, so it
-/// leaves the event of a listener killed after making it but before joining the service.
+/// Removes the shared memory named after ports that no node has any more, once old enough: a
+/// listener's event (`.event…`), a publisher's data segment, a publisher–subscriber connection. A port's tag
+/// is made before any of these, and iceoryx2 removes them when it removes the port from its
+/// service, so it leaves those of a port killed after making them but before joining the
+/// service, and a connection one side made to a peer whose cleaning had already passed it.
 /// Returns how many were removed.
-fn remove_orphaned_listener_events(config: &Config) -> usize {
+fn remove_orphaned_port_segments(config: &Config) -> usize {
     let prefix = &config.global.prefix;
     let ports: HashSet<u128> = entries(&std_path(&config.global.node_dir()))
         .iter()
@@ -165,23 +166,44 @@ fn remove_orphaned_listener_events(config: &Config) -> usize {
         .filter_map(|tag| record_id(&tag, prefix, &config.global.node.port_tag_suffix))
         .collect();
     let prefix = String::from_utf8_lossy(prefix.as_bytes()).into_owned();
-    let event = String::from_utf8_lossy(config.global.service.event_connection_suffix.as_bytes());
+    let service = &config.global.service;
+    let suffixes: Vec<String> = [
+        &service.event_connection_suffix,
+        &service.connection_suffix,
+        &service.data_segment_suffix,
+    ]
+    .iter()
+    .map(|s| String::from_utf8_lossy(s.as_bytes()).into_owned())
+    .collect();
     let orphans: Vec<PathBuf> = entries(Path::new(SHARED_MEMORY_DIR))
         .into_iter()
         .filter(|path| {
-            let listener = path
+            let port_ids = path
                 .file_name()
                 .and_then(|n| n.to_str())
                 .filter(|n| n.starts_with(&prefix))
-                .and_then(|n| n.split_once(event.as_ref()))
-                .and_then(|(name, _)| name.rsplit('_').next())
-                .and_then(|id| id.parse::<u128>().ok());
-            listener.is_some_and(|id| !ports.contains(&id))
+                .and_then(|n| suffixes.iter().find_map(|s| n.split_once(s.as_str())))
+                .map(|(name, _)| name)
+                .map(segment_port_ids)
+                .unwrap_or_default();
+            !port_ids.is_empty()
+                && port_ids.iter().all(|id| !ports.contains(id))
                 && all_older_than(std::slice::from_ref(path), HALF_MADE_AGE)
         })
         .collect();
     orphans.iter().for_each(|p| remove(p));
     orphans.len()
+}
+
+/// The port ids in a port segment's name `<service hash>_<port id>[_<port id>]`. A port id holds
+/// its maker's PID in bits 64..96, so it is above `u64::MAX`; the service hash is hexadecimal and
+/// longer than any `u128` in decimal, so it never parses.
+fn segment_port_ids(name: &str) -> Vec<u128> {
+    name.split('_')
+        .skip(1)
+        .filter_map(|part| part.parse::<u128>().ok())
+        .filter(|id| *id > u128::from(u64::MAX))
+        .collect()
 }
 
 /// The id in a record's file name `<prefix><id><suffix>`.
@@ -353,4 +375,28 @@ pub fn list_topics(namespace: &str) -> Vec<(String, String)> {
     }
     topics.sort();
     topics
+}
+
+#[cfg(test)]
+mod tests {
+    use super::segment_port_ids;
+
+    #[test]
+    fn port_ids_are_read_from_segment_names_and_the_service_hash_is_not_one() {
+        let hash = "iox2_b9fc73e5c1f646968758453273c6c65cb372831b";
+        assert_eq!(
+            segment_port_ids(&format!(
+                "{hash}_158456514828278524616091127272_1901476090252985756089558519272"
+            )),
+            vec![
+                158456514828278524616091127272,
+                1901476090252985756089558519272
+            ]
+        );
+        assert!(segment_port_ids(&format!("{hash}_42")).is_empty());
+        // A hash of decimal digits only is still longer than any u128.
+        let digits = "iox2_1234567890123456789012345678901234567890";
+        assert!(segment_port_ids(digits).is_empty());
+        assert!(segment_port_ids("iox2_9204dd183d1c4d8e_node.0_10_0").is_empty());
+    }
 }
