@@ -429,6 +429,43 @@ class Landmarks(ctypes.Structure):
 _check(Landmarks, 3624, 8, [0, 32, 36, 40])
 
 
+class TrajectoryPose(ctypes.Structure):
+    """`mole.TrajectoryPose.v1`: 16 bytes, alignment 4."""
+
+    _fields_ = [
+        ("tick_offset", ctypes.c_uint32),
+        ("x", ctypes.c_float),
+        ("y", ctypes.c_float),
+        ("theta", ctypes.c_float),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.TrajectoryPose.v1"
+
+
+_check(TrajectoryPose, 16, 4, [0, 4, 8, 12])
+
+
+class Trajectory(ctypes.Structure):
+    """`mole.Trajectory.v1`: 320048 bytes, alignment 8."""
+
+    _fields_ = [
+        ("header", Header),
+        ("first_tick", ctypes.c_uint64),
+        ("n_poses", ctypes.c_uint32),
+        ("estimator", ctypes.c_uint32),
+        ("poses", TrajectoryPose * 20000),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.Trajectory.v1"
+
+
+_check(Trajectory, 320048, 8, [0, 32, 40, 44, 48])
+
+
 class Grid(ctypes.Structure):
     """`mole.Grid.v1`: 262216 bytes, alignment 8."""
 
@@ -669,6 +706,7 @@ MAX_CONTACTS = 8
 MAX_GRID_CELLS = 262144
 MAX_PARTICLES = 16384
 MAX_LANDMARKS = 64
+MAX_TRAJECTORY_POSES = 20000
 MAX_PATH = 512
 MAX_TOPIC_STATS = 16
 NAME_LEN = 32
@@ -733,31 +771,31 @@ WORLD_MAP = Topic(
 )
 
 WORLD_TRUTH = Topic(
-    "world/truth", Truth, history=0, buffer=64, max_publishers=2, max_subscribers=8
+    "world/truth", Truth, history=1, buffer=64, max_publishers=2, max_subscribers=8
 )
 
 SENSING_SCAN = Topic(
-    "sensing/scan", Scan, history=0, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/scan", Scan, history=1, buffer=16, max_publishers=2, max_subscribers=8
 )
 
 SENSING_TACTILE = Topic(
-    "sensing/tactile", Tactile, history=0, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/tactile", Tactile, history=1, buffer=16, max_publishers=2, max_subscribers=8
 )
 
 SENSING_ODOM = Topic(
-    "sensing/odom", Odom, history=0, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/odom", Odom, history=1, buffer=16, max_publishers=2, max_subscribers=8
 )
 
 SENSING_BEACONS = Topic(
-    "sensing/beacons", Beacons, history=0, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/beacons", Beacons, history=1, buffer=16, max_publishers=2, max_subscribers=8
 )
 
 SENSING_FIX = Topic(
-    "sensing/fix", Fix, history=0, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/fix", Fix, history=1, buffer=16, max_publishers=2, max_subscribers=8
 )
 
 LOCALIZATION_POSE = Topic(
-    "localization/pose", Pose, history=0, buffer=64, max_publishers=2, max_subscribers=8
+    "localization/pose", Pose, history=1, buffer=64, max_publishers=2, max_subscribers=8
 )
 
 LOCALIZATION_PARTICLES = Topic(
@@ -768,16 +806,20 @@ LOCALIZATION_LANDMARKS = Topic(
     "localization/landmarks", Landmarks, history=0, buffer=4, max_publishers=2, max_subscribers=8
 )
 
+LOCALIZATION_TRAJECTORY = Topic(
+    "localization/trajectory", Trajectory, history=0, buffer=2, max_publishers=2, max_subscribers=8
+)
+
 MAPPING_GRID = Topic(
-    "mapping/grid", Grid, history=0, buffer=4, max_publishers=2, max_subscribers=8
+    "mapping/grid", Grid, history=1, buffer=4, max_publishers=2, max_subscribers=8
 )
 
 MAPPING_CONTACT = Topic(
-    "mapping/contact", Grid, history=0, buffer=4, max_publishers=2, max_subscribers=8
+    "mapping/contact", Grid, history=1, buffer=4, max_publishers=2, max_subscribers=8
 )
 
 PLANNING_CMD = Topic(
-    "planning/cmd", Cmd, history=0, buffer=16, max_publishers=2, max_subscribers=8
+    "planning/cmd", Cmd, history=1, buffer=16, max_publishers=2, max_subscribers=8
 )
 
 PLANNING_STATUS = Topic(
@@ -802,9 +844,9 @@ STACK_PROCESSES = Topic(
 
 TOPICS = (
     WORLD_MAP, WORLD_TRUTH, SENSING_SCAN, SENSING_TACTILE, SENSING_ODOM, SENSING_BEACONS,
-    SENSING_FIX, LOCALIZATION_POSE, LOCALIZATION_PARTICLES, LOCALIZATION_LANDMARKS, MAPPING_GRID,
-    MAPPING_CONTACT, PLANNING_CMD, PLANNING_STATUS, STACK_TICK, STACK_STATS, MONITOR_STATUS,
-    STACK_PROCESSES,
+    SENSING_FIX, LOCALIZATION_POSE, LOCALIZATION_PARTICLES, LOCALIZATION_LANDMARKS,
+    LOCALIZATION_TRAJECTORY, MAPPING_GRID, MAPPING_CONTACT, PLANNING_CMD, PLANNING_STATUS,
+    STACK_TICK, STACK_STATS, MONITOR_STATUS, STACK_PROCESSES,
 )
 
 

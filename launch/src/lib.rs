@@ -2,7 +2,8 @@
 //!
 //! The `mole` binary (src/main.rs) wires these to the command line and to the stack's IPC:
 //! [`load_launch_file`] → [`apply_swaps`] → [`start_order`] → [`Supervisor::spawn`] each process
-//! → [`Supervisor::poll`] while running (serving `mole swap` through [`hot_swap`]) →
+//! → [`Supervisor::poll`] while running (serving `mole swap` through [`hot_swap`]; a crashed
+//! role restarts from the last outputs the [`keeper::Keeper`] kept) →
 //! [`Supervisor::shutdown`] in [`stop_order`].
 
 pub mod bench_ipc;
@@ -10,6 +11,7 @@ pub mod bench_stack;
 pub mod control;
 mod error;
 pub mod hot_swap;
+pub mod keeper;
 pub mod launch_file;
 pub mod order;
 pub mod stats;

@@ -148,6 +148,8 @@ struct Slot {
     /// Restarts since the last stable run; the backoff doubles with it.
     streak: u32,
     restart_at: Option<Instant>,
+    /// Environment added to the pending restart only (where its kept outputs are).
+    restart_env: Vec<(String, String)>,
     stopping: bool,
     last_exit: Option<ExitStatus>,
     /// A hot swap's new process, running beside `child` until it takes over.
@@ -177,7 +179,7 @@ impl Supervisor {
         {
             return Err(LaunchError::AlreadyRunning { role: spec.role });
         }
-        let child = start(&spec, 0)?;
+        let child = start(&spec, 0, &[])?;
         let slot = Slot {
             spec,
             child: Some(child),
@@ -186,6 +188,7 @@ impl Supervisor {
             restarts_since_spawn: 0,
             streak: 0,
             restart_at: None,
+            restart_env: Vec::new(),
             stopping: false,
             last_exit: None,
             replacement: None,
@@ -200,6 +203,16 @@ impl Supervisor {
     /// Non-blocking: reaps exited children, applies the restart policies and starts children
     /// whose backoff has elapsed. Call it regularly (e.g. every 10-100 ms).
     pub fn poll(&mut self) -> Vec<SupervisorEvent> {
+        self.poll_with(|_, _| Vec::new())
+    }
+
+    /// [`Supervisor::poll`], calling `before_restart(role, attempt)` as soon as a role that its
+    /// policy restarts is found dead, before anything else happens; the environment it returns
+    /// is added to that restart only (the launcher points it at the outputs it kept).
+    pub fn poll_with(
+        &mut self,
+        mut before_restart: impl FnMut(&str, u32) -> Vec<(String, String)>,
+    ) -> Vec<SupervisorEvent> {
         let mut events = Vec::new();
         let now = Instant::now();
         for slot in &mut self.slots {
@@ -235,6 +248,7 @@ impl Supervisor {
                             role: slot.spec.role.clone(),
                         });
                     } else {
+                        slot.restart_env = before_restart(&slot.spec.role, slot.restarts + 1);
                         slot.restart_at = Some(now + backoff(&policy, slot.streak));
                     }
                 }
@@ -244,7 +258,8 @@ impl Supervisor {
                 && now >= at
             {
                 slot.restart_at = None;
-                match start(&slot.spec, slot.restarts + 1) {
+                let env = std::mem::take(&mut slot.restart_env);
+                match start(&slot.spec, slot.restarts + 1, &env) {
                     Ok(child) => {
                         slot.child = Some(child);
                         slot.started = now;
@@ -379,7 +394,7 @@ impl Supervisor {
         if slot.child.is_none() || slot.replacement.is_some() {
             return Err(LaunchError::NotRunning { role: spec.role });
         }
-        let child = start(&spec, 0)?;
+        let child = start(&spec, 0, &[])?;
         let pid = child.id();
         slot.replacement = Some((child, spec));
         Ok(pid)
@@ -538,7 +553,7 @@ fn signal_group(child: &Child, signal: Signal) {
 }
 
 /// Opens the log (creating its directory), writes a marker line and starts the program.
-fn start(spec: &ChildSpec, attempt: u32) -> Result<Child, LaunchError> {
+fn start(spec: &ChildSpec, attempt: u32, env: &[(String, String)]) -> Result<Child, LaunchError> {
     let log_err = |source| LaunchError::Log {
         role: spec.role.clone(),
         path: spec.log_path.clone(),
@@ -571,7 +586,7 @@ fn start(spec: &ChildSpec, attempt: u32) -> Result<Child, LaunchError> {
     let mut command = Command::new(&spec.program);
     command
         .args(&spec.args)
-        .envs(spec.env.iter().map(|(k, v)| (k, v)))
+        .envs(spec.env.iter().chain(env).map(|(k, v)| (k, v)))
         .stdin(Stdio::null())
         .stdout(log)
         .stderr(stderr)

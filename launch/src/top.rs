@@ -53,6 +53,7 @@ fn open(namespace: &str, shutdown: Arc<AtomicBool>) -> Result<(Context, Ports), 
             rate_hz: 100.0,
             seed: None,
             takeover: false,
+            resume: None,
         };
         let ctx = Context::with_shutdown_flag(TOP_ROLE, &args, shutdown.clone())
             .map_err(|e| Failure::run(e.to_string()))?;

@@ -6,6 +6,7 @@
 mod prepare;
 
 use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
+use crate::keeper::Keeper;
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::{
@@ -42,6 +43,9 @@ const STALL_TIMEOUT: Duration = Duration::from_secs(15);
 const POLL: Duration = Duration::from_millis(50);
 /// The launcher's own node name; its statistics are not a role's.
 pub const LAUNCHER_NODE: &str = "launcher";
+/// Where, in the run's directory, the keeper writes a crashed role's last outputs for its
+/// restart (removed at the end of the run).
+const RESUME_DIR: &str = "resume";
 
 #[derive(Debug, Clone, Args)]
 pub struct UpArgs {
@@ -260,6 +264,8 @@ struct Stack<'a> {
     args: &'a UpArgs,
     plan: Plan,
     ports: Ports,
+    /// Declared after `supervisor`'s users are done with it: see [`finish`].
+    keeper: Keeper,
     supervisor: Supervisor,
     watch: Watch,
     interrupted: Arc<AtomicBool>,
@@ -273,11 +279,14 @@ fn start(args: &UpArgs, plan: Plan) -> Result<Stack<'_>, Failure> {
     let flag = interrupted.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .map_err(|e| Failure::run(format!("cannot install the Ctrl-C handler: {e}")))?;
-    let ports = open_ports(args, &plan, interrupted.clone()).map_err(Failure::run)?;
+    let common = common_args(args, &plan);
+    let ports = open_ports(&common, interrupted.clone()).map_err(Failure::run)?;
+    let keeper = Keeper::start(&common, args.out.join(RESUME_DIR)).map_err(Failure::run)?;
     let order = start_order(&plan.launch.processes).map_err(|e| Failure::input(e.to_string()))?;
     let mut stack = Stack {
         args,
         ports,
+        keeper,
         supervisor: Supervisor::new(),
         watch: Watch::new(),
         interrupted,
@@ -307,19 +316,24 @@ fn start(args: &UpArgs, plan: Plan) -> Result<Stack<'_>, Failure> {
     Ok(stack)
 }
 
-/// The launcher's node in the stack's namespace and its ports: statistics and the monitor's
-/// status in, stack/processes and stack/control out.
-fn open_ports(args: &UpArgs, plan: &Plan, interrupted: Arc<AtomicBool>) -> Result<Ports, String> {
-    let common = CommonArgs {
+/// The stack's settings as its processes take them.
+fn common_args(args: &UpArgs, plan: &Plan) -> CommonArgs {
+    CommonArgs {
         namespace: args.namespace.clone(),
         mode: plan.mode,
         rate_hz: plan.launch.stack.rate_hz,
         seed: Some(plan.seed),
         takeover: false,
-    };
+        resume: None,
+    }
+}
+
+/// The launcher's node in the stack's namespace and its ports: statistics and the monitor's
+/// status in, stack/processes and stack/control out.
+fn open_ports(common: &CommonArgs, interrupted: Arc<AtomicBool>) -> Result<Ports, String> {
     // The one sweep before the processes start (they do not sweep, see `Context::new`).
     cleanup_dead_nodes();
-    let ctx = Context::with_shutdown_flag(LAUNCHER_NODE, &common, interrupted)
+    let ctx = Context::with_shutdown_flag(LAUNCHER_NODE, common, interrupted)
         .map_err(|e| e.to_string())?;
     let open = || -> Result<_, mole_runtime::RuntimeError> {
         Ok((
@@ -508,10 +522,19 @@ fn follow_progress(stack: &mut Stack<'_>) -> Option<RunEnd> {
     ))))
 }
 
+/// What the supervisor saw; a role it restarts after a crash resumes from the outputs the
+/// keeper kept.
+fn poll_supervisor(stack: &mut Stack<'_>) -> Vec<SupervisorEvent> {
+    let keeper = &stack.keeper;
+    stack
+        .supervisor
+        .poll_with(|role, attempt| keeper.before_restart(role, attempt))
+}
+
 /// Acts on what the supervisor saw: exits, restarts, roles it gave up on.
 fn handle_events(stack: &mut Stack<'_>) -> Option<RunEnd> {
     let mut end = None;
-    for event in stack.supervisor.poll() {
+    for event in poll_supervisor(stack) {
         let this = match event {
             SupervisorEvent::Exited {
                 role,
@@ -612,6 +635,7 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         args,
         plan,
         ports,
+        keeper,
         mut supervisor,
         watch,
         progress,
@@ -629,6 +653,7 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         tracing::warn!(?killed, "needed SIGKILL");
     }
     drop(ports);
+    keeper.stop();
     cleanup_dead_nodes();
 
     let summary_path = args.out.join("summary.json");
@@ -902,7 +927,7 @@ fn wait_ready(stack: &mut Stack<'_>, role: &str) -> Result<(), Failure> {
         if stack.watch.ready.contains(role) {
             return Ok(());
         }
-        for event in stack.supervisor.poll() {
+        for event in poll_supervisor(stack) {
             if let SupervisorEvent::GaveUp { role } = event {
                 return Err(gave_up_failure(stack, &role));
             }

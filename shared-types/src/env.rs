@@ -30,7 +30,8 @@ env_vars! {
     ESTIMATOR = "MOLE_ESTIMATOR": "the estimator (localization, monitor)";
     TOUCH_THRESHOLD = "MOLE_TOUCH_THRESHOLD": "the force (N) above which a tactile reading is a touch (mapping)";
     OUT = "MOLE_OUT": "where summary.json and map.png go (monitor)";
-    TAKEOVER = "MOLE_TAKEOVER": "start from the last output of the process this one replaces or restarts";
+    TAKEOVER = "MOLE_TAKEOVER": "start from the last output of the process this one replaces (a swap)";
+    RESUME = "MOLE_RESUME": "a directory with the last outputs of the process this one restarts after a crash (set by the launcher)";
 }
 
 #[cfg(test)]

@@ -91,6 +91,7 @@ pub fn all() -> Vec<TypeLayout> {
         layout!(Pose, type_name::<Pose>(); header, x, y, theta, covariance, update_ns, estimator, _pad),
         layout!(Particles, type_name::<Particles>(); header, n_particles, _pad, particles),
         layout!(Landmarks, type_name::<Landmarks>(); header, n_landmarks, estimator, landmarks),
+        layout!(Trajectory, type_name::<Trajectory>(); header, first_tick, n_poses, estimator, poses),
         layout!(Grid, type_name::<Grid>();
             header, width, height, resolution, origin_x, origin_y, kind, _pad, cells),
         layout!(Cmd, type_name::<Cmd>(); header, v, omega, mode, _pad),
@@ -114,6 +115,7 @@ pub fn all() -> Vec<TypeLayout> {
         layout!(BeaconReading, type_name::<BeaconReading>(); id, _pad, range, bearing),
         layout!(Particle, type_name::<Particle>(); x, y, theta, w),
         layout!(Landmark, type_name::<Landmark>(); id, _pad, x, y, covariance),
+        layout!(TrajectoryPose, type_name::<TrajectoryPose>(); tick_offset, x, y, theta),
         layout!(TopicStats, type_name::<TopicStats>();
             topic, direction, _pad, count, dropped, invalid, rate_hz, latency_p50_us,
             latency_p99_us, latency_max_us),
@@ -187,6 +189,7 @@ fn constants() -> Vec<(String, u64)> {
         MAX_GRID_CELLS,
         MAX_PARTICLES,
         MAX_LANDMARKS,
+        MAX_TRAJECTORY_POSES,
         MAX_PATH,
         MAX_TOPIC_STATS,
         NAME_LEN,
@@ -479,6 +482,8 @@ const _: () = {
     assert!(size_of::<Particles>() == 40 + 16 * MAX_PARTICLES);
     assert!(size_of::<Landmark>() == 56);
     assert!(size_of::<Landmarks>() == 40 + 56 * MAX_LANDMARKS);
+    assert!(size_of::<TrajectoryPose>() == 16);
+    assert!(size_of::<Trajectory>() == 48 + 16 * MAX_TRAJECTORY_POSES);
     assert!(size_of::<Grid>() == 72 + MAX_GRID_CELLS);
     assert!(size_of::<Cmd>() == 56);
     assert!(size_of::<PlanStatus>() == 80 + 8 * MAX_PATH);

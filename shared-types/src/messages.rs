@@ -648,6 +648,74 @@ impl Message for Landmarks {
     }
 }
 
+/// Most poses of a smoothed trajectory (`localization/trajectory`): 200 s at 100 Hz, as many as
+/// GraphSLAM's pose graph holds.
+pub const MAX_TRAJECTORY_POSES: usize = 20_000;
+
+/// One pose of a smoothed trajectory, in single precision (a few µm over any arena a grid
+/// message holds), which halves the message.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.TrajectoryPose.v1")]
+pub struct TrajectoryPose {
+    /// Steps after `Trajectory::first_tick`: the pose is the state after that step.
+    pub tick_offset: u32,
+    pub x: f32,
+    pub y: f32,
+    pub theta: f32,
+}
+
+/// `localization/trajectory`: a smoother's optimised trajectory (GraphSLAM, algorithms §6.9.4),
+/// published after each finished solve. Pose i estimates the state after step
+/// `first_tick + poses[i].tick_offset`; the offsets increase strictly.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Trajectory.v1")]
+pub struct Trajectory {
+    pub header: Header,
+    /// The step the offsets count from.
+    pub first_tick: u64,
+    pub n_poses: u32,
+    /// Which estimator: an [`crate::EstimatorKind`] code.
+    pub estimator: u32,
+    pub poses: [TrajectoryPose; MAX_TRAJECTORY_POSES],
+}
+
+impl Trajectory {
+    pub fn poses(&self) -> &[TrajectoryPose] {
+        &self.poses[..(self.n_poses as usize).min(MAX_TRAJECTORY_POSES)]
+    }
+}
+
+impl Message for Trajectory {
+    fn header(&self) -> &Header {
+        &self.header
+    }
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+    fn validate(&self) -> Result<(), Invalid> {
+        within("n_poses", self.n_poses, MAX_TRAJECTORY_POSES)?;
+        if crate::EstimatorKind::from_code(self.estimator).is_none() {
+            return Err(Invalid::UnknownCode("estimator"));
+        }
+        let mut previous = None;
+        for p in self.poses() {
+            all_finite("poses", &[p.x, p.y, p.theta])?;
+            if previous.is_some_and(|offset| p.tick_offset <= offset) {
+                return Err(Invalid::OutOfRange("poses.tick_offset"));
+            }
+            previous = Some(p.tick_offset);
+        }
+        if let Some(last) = previous
+            && self.first_tick.checked_add(u64::from(last)).is_none()
+        {
+            return Err(Invalid::OutOfRange("first_tick"));
+        }
+        Ok(())
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // mapping/*
 // ---------------------------------------------------------------------------------------------
@@ -1055,6 +1123,7 @@ mod tests {
         assert_eq!(bytemuck::zeroed_box::<Pose>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Particles>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Landmarks>().validate(), Ok(()));
+        assert_eq!(bytemuck::zeroed_box::<Trajectory>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Cmd>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<PlanStatus>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Tick>().validate(), Ok(()));
@@ -1065,6 +1134,32 @@ mod tests {
             bytemuck::zeroed_box::<Grid>().validate(),
             Err(Invalid::OutOfRange("resolution"))
         );
+    }
+
+    /// A trajectory's poses go forward in time, one per step, and end at a tick that exists.
+    #[test]
+    fn a_trajectory_moves_forward_from_its_first_tick() {
+        let mut path: Box<Trajectory> = bytemuck::zeroed_box();
+        path.estimator = crate::EstimatorKind::GraphSlam.code();
+        path.n_poses = 3;
+        for (i, offset) in [0, 1, 3].into_iter().enumerate() {
+            path.poses[i].tick_offset = offset;
+        }
+        assert_eq!(path.validate(), Ok(()));
+        path.poses[2].tick_offset = 1;
+        assert_eq!(
+            path.validate(),
+            Err(Invalid::OutOfRange("poses.tick_offset")),
+            "a step twice"
+        );
+        path.poses[2].tick_offset = 3;
+        path.first_tick = u64::MAX - 2;
+        assert_eq!(path.validate(), Err(Invalid::OutOfRange("first_tick")));
+        path.first_tick = 10;
+        path.poses[1].y = f32::NAN;
+        assert_eq!(path.validate(), Err(Invalid::NotFinite("poses")));
+        path.n_poses = MAX_TRAJECTORY_POSES as u32 + 1;
+        assert_eq!(path.validate(), Err(Invalid::CountAboveCapacity("n_poses")));
     }
 
     #[test]

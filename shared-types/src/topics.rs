@@ -91,23 +91,28 @@ pub trait TopicVisitor {
     fn visit<M: crate::Message>(&mut self, constant: &'static str, topic: Topic<M>);
 }
 
+// History 1 on the control loop's topics: a lockstep process restarted after a crash missed the
+// step sent while it was down; its publisher hands it that step from history while it waits
+// (`Context::offer_history`).
 topics! {
     /// The arena, robot and sensor settings, once (history 1 for processes that join late).
     WORLD_MAP: WorldMap = Topic::new("world/map").history(1).buffer(2);
     /// The true state after each step.
-    WORLD_TRUTH: Truth = Topic::new("world/truth").buffer(64);
-    SENSING_SCAN: Scan = Topic::new("sensing/scan");
-    SENSING_TACTILE: Tactile = Topic::new("sensing/tactile");
-    SENSING_ODOM: Odom = Topic::new("sensing/odom");
-    SENSING_BEACONS: Beacons = Topic::new("sensing/beacons");
-    SENSING_FIX: Fix = Topic::new("sensing/fix");
-    LOCALIZATION_POSE: Pose = Topic::new("localization/pose").buffer(64);
+    WORLD_TRUTH: Truth = Topic::new("world/truth").history(1).buffer(64);
+    SENSING_SCAN: Scan = Topic::new("sensing/scan").history(1);
+    SENSING_TACTILE: Tactile = Topic::new("sensing/tactile").history(1);
+    SENSING_ODOM: Odom = Topic::new("sensing/odom").history(1);
+    SENSING_BEACONS: Beacons = Topic::new("sensing/beacons").history(1);
+    SENSING_FIX: Fix = Topic::new("sensing/fix").history(1);
+    LOCALIZATION_POSE: Pose = Topic::new("localization/pose").history(1).buffer(64);
     LOCALIZATION_PARTICLES: Particles = Topic::new("localization/particles").buffer(2);
     /// The SLAM estimators' beacon map.
     LOCALIZATION_LANDMARKS: Landmarks = Topic::new("localization/landmarks").buffer(4);
-    MAPPING_GRID: Grid = Topic::new("mapping/grid").buffer(4);
-    MAPPING_CONTACT: Grid = Topic::new("mapping/contact").buffer(4);
-    PLANNING_CMD: Cmd = Topic::new("planning/cmd");
+    /// A smoother's optimised trajectory (GraphSLAM), after each finished solve.
+    LOCALIZATION_TRAJECTORY: Trajectory = Topic::new("localization/trajectory").buffer(2);
+    MAPPING_GRID: Grid = Topic::new("mapping/grid").history(1).buffer(4);
+    MAPPING_CONTACT: Grid = Topic::new("mapping/contact").history(1).buffer(4);
+    PLANNING_CMD: Cmd = Topic::new("planning/cmd").history(1);
     PLANNING_STATUS: PlanStatus = Topic::new("planning/status").buffer(4);
     STACK_TICK: Tick = Topic::new("stack/tick");
     STACK_STATS: Stats = Topic::new("stack/stats").buffer(64).max_publishers(32);

@@ -315,6 +315,7 @@ pub fn join_realtime_stack(namespace: &str, role: &str) -> mole_runtime::Context
         rate_hz: 100.0,
         seed: None,
         takeover: false,
+        resume: None,
     };
     let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     mole_runtime::Context::with_shutdown_flag(role, &args, shutdown)
@@ -350,4 +351,40 @@ impl Stack {
             child: Some(child),
         }
     }
+}
+
+/// The pid of `program` running in `namespace`.
+pub fn pid_of(namespace: &str, program: &str) -> Option<u32> {
+    // The kernel keeps the first 15 bytes of a program's name in `comm`.
+    let comm = &program[..program.len().min(15)];
+    processes_of(namespace).into_iter().find(|pid| {
+        std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim() == comm)
+    })
+}
+
+/// Waits until `program` runs in `namespace` with a pid other than `old`.
+pub fn wait_for_new_pid(
+    namespace: &str,
+    program: &str,
+    old: Option<u32>,
+    timeout: Duration,
+    out: &std::path::Path,
+) -> u32 {
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        if let Some(pid) = pid_of(namespace, program).filter(|p| Some(*p) != old) {
+            return pid;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{program} did not come back within {timeout:?}\n{}",
+            logs(out)
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Sends `signal` to `pid`.
+pub fn signal(pid: u32, signal: nix::sys::signal::Signal) {
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), signal).expect("signal");
 }

@@ -333,8 +333,9 @@ fn data_paths_resolve_cwd_first_then_up_to_the_workspace_root() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
-/// The shipped stacks run every role of the graph with its program, the world never restarted
-/// and started after every role that reads what it writes, so no step goes unheard.
+/// The shipped stacks run every role of the graph with its program, each restarted on failure
+/// (the world too: it resumes from its last truth), the world started after every role that
+/// reads what it writes, so no step goes unheard.
 #[test]
 fn shipped_stacks_are_the_graph() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("stacks");
@@ -357,12 +358,8 @@ fn shipped_stacks_are_the_graph() {
         for p in &lf.processes {
             let spec = mole_types::graph::spec(&p.role).expect("a graph role");
             assert_eq!(p.command, spec.program, "{name}");
-            if spec.role == Role::World {
-                assert_eq!(p.restart.policy, RestartWhen::Never);
-            } else {
-                assert_eq!(p.restart.policy, RestartWhen::OnFailure);
-                assert_eq!(p.restart.max, 5);
-            }
+            assert_eq!(p.restart.policy, RestartWhen::OnFailure, "{name}: {}", p.role);
+            assert_eq!(p.restart.max, 5);
         }
         let order = crate::start_order(&lf.processes).unwrap();
         let started = |role: Role| {

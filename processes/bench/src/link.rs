@@ -129,6 +129,7 @@ pub(crate) fn with_runtime<M: BenchMessage, T>(
         rate_hz: 100.0,
         seed: None,
         takeover: false,
+        resume: None,
     };
     let mut ctx = Context::with_shutdown_flag(role, &args, Arc::new(AtomicBool::new(false)))?;
     let data_out = ports

@@ -32,7 +32,7 @@ pub use pf::{ParticleFilter, PfConfig, low_variance_resample};
 
 pub use graph_slam::GraphSlamEstimator;
 pub use mole_types::EstimatorKind;
-use mole_types::{Beacons, Fix, Landmarks, Odom, Particles, Pose, Pose2, WorldMap};
+use mole_types::{Beacons, Fix, Landmarks, Odom, Particles, Pose, Pose2, Trajectory, WorldMap};
 pub use slam::{EkfSlamEstimator, FastSlamEstimator};
 use thiserror::Error;
 
@@ -46,6 +46,20 @@ pub struct Readings<'a> {
     pub beacons: Option<&'a Beacons>,
     /// The position fix of this step (it may still say `valid == 0`: no fix).
     pub fix: Option<&'a Fix>,
+}
+
+/// The odometry of a step that comes `ticks` world steps after the one handled before (a crashed
+/// sensing, a restart of this process, a realtime step skipped under load): its velocities held
+/// over the whole gap, dt capped at [`models::MAX_ODOM_DT`]. Predicting over the gap moves the
+/// estimate to where the robot went and widens its covariance for the motion nobody measured;
+/// predicting one step left the estimate behind and the χ² gate then refused every correction
+/// (a 0.3 s gap took the EKF's RMSE from 0.015 m to 0.16 m for the rest of the run).
+pub fn odometry_over_gap(odom: &Odom, ticks: Option<u64>) -> Odom {
+    let steps = ticks.unwrap_or(1).max(1) as f64;
+    Odom {
+        dt: (odom.dt * steps).min(models::MAX_ODOM_DT),
+        ..*odom
+    }
 }
 
 /// What every estimator does each step; the process main calls step (predict, then correct),
@@ -96,6 +110,27 @@ pub trait Estimator {
     /// SLAM estimators; the others return false and leave `out` alone, and nothing should be
     /// published.
     fn write_landmarks(&self, out: &mut Landmarks) -> bool {
+        let _ = out;
+        false
+    }
+    /// Fuses another robot's landmark map (its `localization/landmarks`, same map frame) into
+    /// the estimate by covariance intersection and returns what became of its landmarks, for the
+    /// estimators that can (EKF-SLAM, [`slam::FUSING_ESTIMATOR`]); the others return `None` and
+    /// change nothing. Allocates nothing.
+    fn fuse_landmarks(&mut self, other: &Landmarks) -> Option<slam::FuseReport> {
+        let _ = other;
+        None
+    }
+    /// Solves a background smoother has finished and handed over so far (GraphSLAM); 0 for the
+    /// estimators without one. Each change brings a new trajectory for `write_trajectory`.
+    fn smoother_solves(&self) -> u64 {
+        0
+    }
+    /// Fills `first_tick`, `n_poses`, `estimator` and the poses of the loaned
+    /// `localization/trajectory` sample (never its header) with the newest smoothed trajectory
+    /// and returns true, for an estimator with a smoother (GraphSLAM); the others return false
+    /// and leave `out` alone, and nothing should be published.
+    fn write_trajectory(&self, out: &mut Trajectory) -> bool {
         let _ = out;
         false
     }
@@ -179,6 +214,19 @@ pub fn build_estimator(
 /// `landmarks` (mean and 2×2 covariance, uncorrelated with the pose and with each other: the
 /// message carries no cross-covariances). Landmarks that are not finite and positive definite
 /// are skipped and counted as ignored.
+/// [`resume`] from `pose` when there is one (a swap or a restart), else [`build_estimator`].
+pub fn start_estimator(
+    kind: EstimatorKind,
+    map: &WorldMap,
+    pose: Option<&Pose>,
+    landmarks: Option<&Landmarks>,
+) -> Result<Box<dyn Estimator>, LocalizationError> {
+    match pose {
+        Some(pose) => resume(kind, map, pose, landmarks),
+        None => build_estimator(kind, map),
+    }
+}
+
 pub fn resume(
     kind: EstimatorKind,
     map: &WorldMap,
@@ -217,6 +265,20 @@ pub(crate) mod test_support {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A gap of n steps predicts over n·dt at the newest velocities, capped at the longest dt
+    /// odometry may cover; no gap (or a fresh start) is one step.
+    #[test]
+    fn odometry_over_a_gap_covers_the_whole_gap() {
+        let mut odom: Odom = bytemuck::Zeroable::zeroed();
+        (odom.v, odom.omega, odom.dt) = (0.3, -0.2, 0.01);
+        let dt = |ticks| odometry_over_gap(&odom, ticks).dt;
+        assert_eq!((dt(None), dt(Some(1)), dt(Some(0))), (0.01, 0.01, 0.01));
+        assert!((dt(Some(30)) - 0.3).abs() < 1e-12);
+        assert_eq!(dt(Some(5000)), models::MAX_ODOM_DT);
+        let bridged = odometry_over_gap(&odom, Some(30));
+        assert_eq!((bridged.v, bridged.omega), (0.3, -0.2));
+    }
 
     /// Every kind builds, starts at the start pose, and publishes particles (PF) or landmarks
     /// (SLAM kinds) exactly when it has them.

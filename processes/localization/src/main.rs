@@ -2,11 +2,14 @@
 //! SLAM estimators estimate the beacon map too.
 //!
 //! world/map once, then sensing/{odom, beacons, fix} every step → localization/pose, and
-//! localization/particles (PF) or localization/landmarks (SLAM).
+//! localization/particles (PF) or localization/landmarks (SLAM), and localization/trajectory
+//! after each smoother solve (GraphSLAM). With `--peer` (EKF-SLAM) the landmarks are offered to
+//! another robot on peers/localization/landmarks too, and its offer is fused into them.
 
 use clap::Parser;
-use mole_localization::{Estimator, EstimatorKind, Readings, build_estimator, resume};
-use mole_runtime::{CommonArgs, Order, Process, Rule, now_ns};
+use mole_localization::slam::{PEER_LANDMARKS, PeerArgs, PeerFusion};
+use mole_localization::{EstimatorKind, Readings, odometry_over_gap, start_estimator};
+use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule, now_ns};
 use mole_types::{env, topics};
 use std::process::ExitCode;
 
@@ -24,6 +27,8 @@ struct Args {
     common: CommonArgs,
     #[arg(long, env = env::ESTIMATOR, default_value_t = EstimatorKind::Ekf)]
     estimator: EstimatorKind,
+    #[command(flatten)]
+    peers: PeerArgs,
 }
 
 fn main() -> ExitCode {
@@ -32,12 +37,16 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let kind = args.estimator;
+    let peer = args
+        .peers
+        .checked(kind, &args.common.namespace)
+        .map_err(|e| BadInput(e.to_string()))?;
     let mut p = Process::new("localization", &args.common)?;
-    // A replacement goes on from the estimate (and a SLAM estimator's map) of the one it replaces.
-    let landmarks_were = match kind.is_slam() {
-        true => p.resume_from(topics::LOCALIZATION_LANDMARKS)?,
-        false => None,
-    };
+    // A replacement (a swap, a restart) goes on from the estimate and SLAM map before it.
+    let landmarks_were = kind
+        .is_slam()
+        .then(|| p.resume_from(topics::LOCALIZATION_LANDMARKS));
+    let landmarks_were = landmarks_were.transpose()?.flatten();
     let pose_was = p.resume_from(topics::LOCALIZATION_POSE)?;
     // Sensing publishes odometry last: the fix and the beacons of a step are in when it wakes us.
     let odom = p.trigger(topics::SENSING_ODOM, Order::Newest)?;
@@ -46,24 +55,36 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut pose_out = p.output(topics::LOCALIZATION_POSE)?;
     let mut particles_out = p.output(topics::LOCALIZATION_PARTICLES)?;
     let mut landmarks_out = p.output(topics::LOCALIZATION_LANDMARKS)?;
+    let mut trajectory_out = p.output(topics::LOCALIZATION_TRAJECTORY)?;
+    // Two robots: read the map the peer offers (never waited for) and offer ours.
+    let peer_map = peer
+        .map(|ns| p.peer_input(ns, PEER_LANDMARKS))
+        .transpose()?;
+    let mut offer_out = peer.map(|_| p.peer_output(PEER_LANDMARKS)).transpose()?;
+    let (mut fusion, mut solves) = (PeerFusion::new(args.peers.fuse_every), 0);
 
     p.run(
         |start| {
-            let estimator: Box<dyn Estimator> = match pose_was.as_deref() {
-                Some(pose) => resume(kind, start.map, pose, landmarks_were.as_deref())?,
-                None => build_estimator(kind, start.map)?,
-            };
-            Ok(estimator)
+            Ok(start_estimator(
+                kind,
+                start.map,
+                pose_was.as_deref(),
+                landmarks_were.as_deref(),
+            )?)
         },
         |estimator, step| {
-            let readings = Readings {
-                odom: step.trigger(odom),
-                beacons: step.get(beacons),
-                fix: step.get(fix),
-            };
+            let odom = odometry_over_gap(step.trigger(odom), step.ticks_since_last());
+            let (beacons, fix) = (step.get(beacons), step.get(fix));
             let started = now_ns();
-            estimator.step(&readings);
+            estimator.step(&Readings {
+                odom: &odom,
+                beacons,
+                fix,
+            });
             let update_ns = now_ns().saturating_sub(started);
+            if let Some(peer_map) = peer_map {
+                fusion.step(step.tick(), step.get(peer_map), estimator.as_mut());
+            }
             let (k, origin) = (step.tick(), step.origin_ns());
             pose_out.publish(k, origin, |pose| {
                 estimator.write_pose(pose);
@@ -72,11 +93,21 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             if kind == EstimatorKind::Pf && k % PARTICLES_EVERY == 0 {
                 particles_out.publish(k, origin, |out| _ = estimator.write_particles(out))?;
             }
-            // Every step, so that a swap takes over the landmarks with the pose.
+            // Every step, so that a swap or a restart takes over the landmarks with the pose.
             if kind.is_slam() {
                 landmarks_out.publish(k, origin, |out| _ = estimator.write_landmarks(out))?;
             }
+            if let Some(offer_out) = offer_out.as_mut() {
+                offer_out.publish(k, origin, |out| _ = estimator.write_landmarks(out))?;
+            }
+            // After each solve a smoother (GraphSLAM) finished: the whole smoothed trajectory.
+            if estimator.smoother_solves() != solves {
+                solves = estimator.smoother_solves();
+                trajectory_out.publish(k, origin, |out| _ = estimator.write_trajectory(out))?;
+            }
             Ok(())
         },
-    )
+    )?;
+    peer.inspect(|peer| fusion.log_totals(peer));
+    Ok(())
 }

@@ -4,7 +4,10 @@
 
 use mole_localization::{Estimator, EstimatorKind, GraphSlamEstimator, Readings};
 use mole_runtime::{CountingAllocator, allocations_during};
-use mole_types::{BeaconReading, BeaconSite, Beacons, Fix, LANDMARK_ANONYMOUS, Odom, WorldMap};
+use mole_types::{
+    BeaconReading, BeaconSite, Beacons, Fix, LANDMARK_ANONYMOUS, Landmarks, Odom, Trajectory,
+    WorldMap,
+};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -144,7 +147,7 @@ fn steady_state_steps_do_not_allocate() {
 }
 
 /// GraphSLAM's step path allocates nothing either in the steps that take a smoothed solution
-/// over from the smoother thread.
+/// over from the smoother thread, nor in writing that solution's trajectory into a message.
 #[test]
 fn graph_slam_steps_that_take_a_solution_over_do_not_allocate() {
     let map = map();
@@ -157,13 +160,62 @@ fn graph_slam_steps_that_take_a_solution_over_do_not_allocate() {
     // Steps until a solution has been taken over; the smoother solves every 100 steps, and the
     // short sleeps give it the time (the bound only guards against hanging).
     let mut k = 5;
+    let mut trajectory: Box<Trajectory> = bytemuck::zeroed_box();
     let n = allocations_during(|| {
         while graph.solves() == 0 && k < 20_000 {
             step.run(&mut graph, k, false);
             std::thread::sleep(std::time::Duration::from_micros(200));
             k += 1;
         }
+        graph.write_trajectory(&mut trajectory);
     });
+    assert!(trajectory.n_poses > 0, "no trajectory written");
     assert!(graph.solves() > 0, "no solution taken over in {k} steps");
     assert_eq!(n, 0, "{n} allocations in {} steps", k - 5);
+}
+
+/// Fusing a peer robot's landmark map into EKF-SLAM (a `PeerFusion` round: its landmarks fused
+/// by CI and one it lacks added) allocates nothing either.
+#[test]
+fn a_peer_fusion_round_does_not_allocate() {
+    use mole_localization::slam::PeerFusion;
+    let map = map();
+    let mut est =
+        mole_localization::build_estimator(EstimatorKind::EkfSlam, &map).expect("EKF-SLAM builds");
+    let mut step = Step::new();
+    for k in 0..10 {
+        step.run(est.as_mut(), k, false);
+    }
+    // The peer's map: ours, twice as confident and 2 cm off, and a landmark we have not seen.
+    let mut peer: Box<Landmarks> = bytemuck::zeroed_box();
+    assert!(est.write_landmarks(&mut peer));
+    let n = peer.n_landmarks as usize;
+    for l in &mut peer.landmarks[..n] {
+        l.x += 0.02;
+        l.covariance.iter_mut().for_each(|c| *c *= 0.5);
+    }
+    peer.landmarks[n] = mole_types::Landmark {
+        id: 3,
+        _pad: 0,
+        x: 1.0,
+        y: 9.0,
+        covariance: [0.01, 0.0, 0.0, 0.01],
+    };
+    peer.n_landmarks += 1;
+    peer.header.stamp_ns = 1;
+    let mut fusion = PeerFusion::new(1);
+    let mut report = None;
+    let allocations = allocations_during(|| {
+        report = fusion.step(10, Some(&peer), est.as_mut());
+    });
+    let report = report.expect("a round with a new map");
+    assert_eq!(
+        (report.fused + report.kept, report.added),
+        (n, 1),
+        "{report:?}"
+    );
+    assert_eq!(
+        allocations, 0,
+        "{allocations} allocations in a fusion round"
+    );
 }

@@ -8,6 +8,7 @@
 
 mod render;
 mod slam;
+mod smoothed;
 mod summary;
 mod track;
 mod truth;
@@ -24,9 +25,10 @@ use mole_types::{
     GRID_CONTACT, GRID_FRONTIER, Grid, Invalid, Landmarks, MAX_PARTICLES, MAX_PATH,
     MAX_TOPIC_STATS, MODE_STALLED, Message, NAME_LEN, Particles, PlanStatus, Pose, RunStatus,
     STATUS_EXPLORATION_COMPLETE, Square, Stats, TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, TopicStats,
-    Truth, WorldMap, read_name, wrap_angle,
+    Trajectory, Truth, WorldMap, read_name, wrap_angle,
 };
 use slam::LandmarkMap;
+use smoothed::SmoothedTrajectory;
 use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -184,6 +186,7 @@ pub struct Monitor {
 
     particles: Vec<[f32; 2]>,
     landmarks: LandmarkMap,
+    smoothed: SmoothedTrajectory,
 
     stats: Vec<ProcessStats>,
 
@@ -256,6 +259,7 @@ impl Monitor {
             update_ns: hist()?,
             particles: Vec::with_capacity(MAX_PARTICLES),
             landmarks: LandmarkMap::new(),
+            smoothed: SmoothedTrajectory::new(),
             stats: Vec::with_capacity(MAX_PROCESSES),
             plan_mode: 0,
             stalls: 0,
@@ -330,6 +334,7 @@ impl Monitor {
             theta: truth.theta,
         };
         self.truths[(tick % TRUTH_RING as u64) as usize] = sample;
+        self.smoothed.on_truth(tick, truth.x, truth.y);
         let waiting = self.poses[(tick % POSE_RING as u64) as usize];
         if waiting.valid && waiting.tick == tick {
             self.poses[(tick % POSE_RING as u64) as usize].valid = false;
@@ -344,6 +349,7 @@ impl Monitor {
         self.estimator = Some(pose.estimator);
         self.update_ns.saturating_record(pose.update_ns);
         self.est_track.push(pose.x, pose.y);
+        self.smoothed.on_filter(tick, pose.x, pose.y);
         let sample = PoseSample {
             valid: true,
             tick,
@@ -524,15 +530,25 @@ impl Monitor {
         self.landmarks.on_landmarks(map);
     }
 
-    /// The SLAM section: the last landmark map scored against the true beacons; `None` unless
-    /// the estimator is a SLAM one or a landmark map arrived.
+    /// Takes a smoother's trajectory (GraphSLAM): scored at once against the truth, beside the
+    /// filter's poses of the same ticks, and kept for map.png.
+    pub fn on_trajectory(&mut self, trajectory: &Trajectory) {
+        self.smoothed.on_trajectory(trajectory);
+    }
+
+    /// The SLAM section: the last landmark map scored against the true beacons, and the newest
+    /// smoothed trajectory against the truth and the filter; `None` unless the estimator is a
+    /// SLAM one or a landmark map arrived.
     pub fn slam(&self) -> Option<SlamSummary> {
         let slam_estimator = self
             .estimator
             .and_then(EstimatorKind::from_code)
             .is_some_and(EstimatorKind::is_slam);
-        (slam_estimator || self.landmarks.received())
-            .then(|| self.landmarks.score(&self.scene.beacons))
+        (slam_estimator || self.landmarks.received()).then(|| {
+            let mut section = self.landmarks.score(&self.scene.beacons);
+            self.smoothed.fill(&mut section);
+            section
+        })
     }
 
     /// Keeps the latest counters of one process instance (by role and pid, so a restarted
@@ -745,7 +761,8 @@ impl Monitor {
 
     /// Writes map.png: frontier grid (unexplored dark grey, free light grey, occupied black),
     /// contact cells (red), true obstacle outlines (blue), planned path (gold), particle cloud
-    /// (purple), true trajectory (green), estimated trajectory (orange), start (cyan) and goal
+    /// (purple), true trajectory (green), estimated trajectory (orange), smoothed trajectory
+    /// (azure), true beacons and landmark ellipses, start (cyan) and goal
     /// (magenta) markers, and a legend in a built-in bitmap font. At least 800 px wide, y up.
     pub fn render_png(&self, path: &Path) -> Result<(), MonitorError> {
         let canvas = render::draw(self);
@@ -822,6 +839,9 @@ impl Monitor {
     }
     pub(crate) fn particle_points(&self) -> &[[f32; 2]] {
         &self.particles
+    }
+    pub(crate) fn smoothed_points(&self) -> &[[f32; 2]] {
+        self.smoothed.points()
     }
     pub(crate) fn landmark_estimates(&self) -> &[mole_types::Landmark] {
         self.landmarks.landmarks()

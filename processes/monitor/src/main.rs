@@ -45,6 +45,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let contact = p.observed(topics::MAPPING_CONTACT, false)?;
     let particles = p.observed(topics::LOCALIZATION_PARTICLES, false)?;
     let landmarks = p.observed(topics::LOCALIZATION_LANDMARKS, false)?;
+    let trajectory = p.observed(topics::LOCALIZATION_TRAJECTORY, false)?;
     let plan = p.observed(topics::PLANNING_STATUS, false)?;
     let stats = p.observed(topics::STACK_STATS, false)?;
     let mut status_out = p.output(topics::MONITOR_STATUS)?;
@@ -66,6 +67,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             seen.drain(contact, |x| m.on_contact(x));
             seen.drain(particles, |x| m.on_particles(x));
             seen.drain(landmarks, |x| m.on_landmarks(x));
+            seen.drain(trajectory, |x| m.on_trajectory(x));
             seen.drain(plan, |x| m.on_plan_status(x));
             seen.drain(stats, |x| m.on_stats(x));
             // Lockstep: the last step's estimate and grids were sent before the world's final

@@ -18,13 +18,14 @@ pub(crate) const PLAN: Rgb = [230, 190, 0];
 pub(crate) const PARTICLE: Rgb = [150, 80, 200];
 pub(crate) const TRUE_TRACK: Rgb = [20, 170, 40];
 pub(crate) const EST_TRACK: Rgb = [255, 140, 0];
+pub(crate) const SMOOTHED_TRACK: Rgb = [0, 150, 255];
 pub(crate) const START: Rgb = [0, 200, 200];
 pub(crate) const GOAL: Rgb = [230, 0, 230];
 pub(crate) const BEACON: Rgb = [0, 110, 110];
 pub(crate) const LANDMARK: Rgb = [200, 20, 90];
 
 /// Legend entries, in the order drawn.
-pub(crate) const LEGEND: [(Rgb, &str); 13] = [
+pub(crate) const LEGEND: [(Rgb, &str); 14] = [
     (UNEXPLORED, "UNEXPLORED"),
     (FREE, "FREE"),
     (OCCUPIED, "OCCUPIED"),
@@ -32,6 +33,7 @@ pub(crate) const LEGEND: [(Rgb, &str); 13] = [
     (OBSTACLE, "TRUE OBSTACLE"),
     (TRUE_TRACK, "TRUE PATH"),
     (EST_TRACK, "ESTIMATED PATH"),
+    (SMOOTHED_TRACK, "SMOOTHED PATH"),
     (PLAN, "PLANNED PATH"),
     (PARTICLE, "PARTICLES"),
     (START, "START"),
@@ -255,6 +257,13 @@ pub(crate) fn draw(m: &Monitor) -> Canvas {
     polyline(&mut cv, &l, m.plan_points().iter().copied(), 2, PLAN);
     polyline(&mut cv, &l, m.true_points(), 2, TRUE_TRACK);
     polyline(&mut cv, &l, m.estimated_points(), 2, EST_TRACK);
+    polyline(
+        &mut cv,
+        &l,
+        m.smoothed_points().iter().copied(),
+        2,
+        SMOOTHED_TRACK,
+    );
     for b in &scene.beacons {
         let (x, y) = l.to_px(b.x, b.y);
         cv.fill_rect(x - 5, y - 5, 11, 11, TEXT);

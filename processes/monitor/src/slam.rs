@@ -39,6 +39,22 @@ pub struct SlamSummary {
     pub landmark_nees_interval: Option<[f64; 2]>,
     /// Landmarks whose NEES was computed (Σ positive definite).
     pub landmark_nees_samples: u32,
+    /// `association_errors` over `landmarks` (`null`: no landmark).
+    #[serde(default)]
+    pub association_error_rate: Option<f64>,
+    /// Tick of the newest smoothed trajectory (`localization/trajectory`, GraphSLAM) scored
+    /// below (`null`: none arrived, as for every other estimator).
+    #[serde(default)]
+    pub smoothed_tick: Option<u64>,
+    /// Ticks of that trajectory scored: those with the truth and the filter's pose known.
+    #[serde(default)]
+    pub smoothed_samples: u32,
+    /// √(mean squared position error) of the smoothed poses at those ticks.
+    #[serde(default)]
+    pub smoothed_rmse_m: Option<f64>,
+    /// The same for the filter's published poses (`localization/pose`) at the same ticks.
+    #[serde(default)]
+    pub filter_rmse_same_ticks_m: Option<f64>,
 }
 
 /// The last landmark map received, kept in storage sized once.
@@ -115,6 +131,8 @@ impl LandmarkMap {
         out.landmark_rmse_m = (matched > 0)
             .then(|| (squared_sum / f64::from(matched)).sqrt())
             .and_then(finite);
+        out.association_error_rate = (out.landmarks > 0)
+            .then(|| f64::from(out.association_errors) / f64::from(out.landmarks));
         let n = out.landmark_nees_samples;
         out.landmark_nees = (n > 0).then(|| nees_sum / f64::from(n)).and_then(finite);
         out.landmark_nees_interval = mean_nees_interval(2, n);

@@ -792,6 +792,12 @@ fn per_message_methods_do_not_allocate_in_steady_state() {
     plan.n_path = mole_types::MAX_PATH as u32;
     let mut landmarks: Box<Landmarks> = bytemuck::zeroed_box();
     landmarks.n_landmarks = mole_types::MAX_LANDMARKS as u32;
+    let mut path: Box<Trajectory> = bytemuck::zeroed_box();
+    path.first_tick = 40;
+    path.n_poses = mole_types::MAX_TRAJECTORY_POSES as u32;
+    for (i, p) in path.poses.iter_mut().enumerate() {
+        p.tick_offset = i as u32;
+    }
     let st = stats(
         "mapping",
         3,
@@ -819,6 +825,7 @@ fn per_message_methods_do_not_allocate_in_steady_state() {
             m.on_particles(&particles);
             m.on_plan_status(&plan);
             m.on_landmarks(&landmarks);
+            m.on_trajectory(&path);
             m.on_stats(&st);
             m.on_stats(&new_process);
             m.write_status(&mut status);
@@ -989,6 +996,7 @@ fn slam_section_scores_a_hand_made_map() {
     assert_eq!(s.tick, Some(40));
     assert_eq!((s.landmarks, s.true_beacons, s.beacons_mapped), (5, 3, 3));
     assert_eq!((s.anonymous_landmarks, s.association_errors), (2, 2));
+    assert_relative_eq!(s.association_error_rate.unwrap(), 2.0 / 5.0);
     // (0.1² + 0.2² + 0.3² + 0.4²) / 4 = 0.075.
     assert_relative_eq!(
         s.landmark_rmse_m.unwrap(),
@@ -1095,4 +1103,109 @@ fn render_png_draws_beacons_and_landmark_ellipses() {
         "ellipse end of the minor axis"
     );
     assert!(!near(2.75, 1.0, render::LANDMARK), "inside the ellipse");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The smoothed trajectory against the truth and the filter
+// ---------------------------------------------------------------------------------------------
+
+/// A GraphSLAM trajectory published at `tick`: (tick offset, x, y) per pose from `first_tick`.
+fn trajectory(tick: u64, first_tick: u64, poses: &[(u32, f64, f64)]) -> Box<Trajectory> {
+    let mut path: Box<Trajectory> = bytemuck::zeroed_box();
+    path.header.tick = tick;
+    path.first_tick = first_tick;
+    path.estimator = EstimatorKind::GraphSlam.code();
+    path.n_poses = poses.len() as u32;
+    for (slot, &(tick_offset, x, y)) in path.poses.iter_mut().zip(poses) {
+        *slot = mole_types::TrajectoryPose {
+            tick_offset,
+            x: x as f32,
+            y: y as f32,
+            theta: 0.0,
+        };
+    }
+    path
+}
+
+/// The smoothed RMSE and the filter's are taken over the same ticks, worked out by hand: those
+/// of the trajectory with both a truth and a filter pose (not tick 4, whose pose is missing, nor
+/// tick 50, never simulated), and no longer a tick the ring has let go.
+#[test]
+fn smoothed_and_filter_rmse_cover_the_same_ticks() {
+    let mut m = Monitor::new(&beacon_world()).unwrap();
+    let x = |tick: u64| 1.0 + 0.1 * tick as f64;
+    for tick in 0..10 {
+        m.on_truth(&truth(tick, x(tick), 1.0, 0.0));
+        if tick != 4 {
+            // The filter is 0.3 m off on even ticks, 0.1 m on odd ones.
+            let dy = if tick % 2 == 0 { 0.3 } else { 0.1 };
+            let mut p = pose(tick, x(tick), 1.0 + dy, 0.0, [0.1; 3]);
+            p.estimator = EstimatorKind::GraphSlam.code();
+            m.on_pose(&p);
+        }
+    }
+    let s = m.slam().expect("a SLAM estimator");
+    assert_eq!((s.smoothed_tick, s.smoothed_samples), (None, 0), "none yet");
+    assert_eq!(
+        (s.smoothed_rmse_m, s.filter_rmse_same_ticks_m),
+        (None, None)
+    );
+    // Ticks 2..=8, 0.1 m off (0.2 m at tick 8), and tick 50.
+    let mut poses: Vec<(u32, f64, f64)> = (2..=8u64)
+        .map(|t| ((t - 2) as u32, x(t) + if t == 8 { 0.2 } else { 0.1 }, 1.0))
+        .collect();
+    poses.push((48, 0.0, 0.0));
+    let path = trajectory(9, 2, &poses);
+    m.on_trajectory(&path);
+    let s = m.slam().unwrap();
+    // Ticks 2, 3, 5, 6, 7, 8: smoothed 5 · 0.01 + 0.04, filter 3 · 0.09 + 3 · 0.01.
+    assert_eq!((s.smoothed_tick, s.smoothed_samples), (Some(9), 6));
+    assert_relative_eq!(
+        s.smoothed_rmse_m.unwrap(),
+        (0.09f64 / 6.0).sqrt(),
+        max_relative = 1e-5
+    );
+    assert_relative_eq!(
+        s.filter_rmse_same_ticks_m.unwrap(),
+        (0.30f64 / 6.0).sqrt(),
+        max_relative = 1e-5
+    );
+    // Tick 2's slot now holds a tick one ring later, truth and filter: the same trajectory
+    // again scores 5 ticks.
+    let later = 2 + smoothed::TICK_HISTORY as u64;
+    m.on_truth(&truth(later, 1.0, 1.0, 0.0));
+    let mut p = pose(later, 1.0, 1.0, 0.0, [0.1; 3]);
+    p.estimator = EstimatorKind::GraphSlam.code();
+    m.on_pose(&p);
+    m.on_trajectory(&path);
+    let s = m.slam().unwrap();
+    assert_eq!(s.smoothed_samples, 5);
+    assert_relative_eq!(
+        s.smoothed_rmse_m.unwrap(),
+        (0.08f64 / 5.0).sqrt(),
+        max_relative = 1e-5
+    );
+    assert_relative_eq!(
+        s.filter_rmse_same_ticks_m.unwrap(),
+        (0.21f64 / 5.0).sqrt(),
+        max_relative = 1e-5
+    );
+}
+
+/// map.png draws the newest smoothed trajectory in its own colour.
+#[test]
+fn render_png_draws_the_smoothed_trajectory() {
+    let mut m = Monitor::new(&beacon_world()).unwrap();
+    m.on_trajectory(&trajectory(3, 0, &[(0, 0.5, 0.5), (1, 3.5, 0.5)]));
+    let path = temp_path("smoothed_map.png");
+    m.render_png(&path).unwrap();
+    let file = std::io::BufReader::new(std::fs::File::open(&path).unwrap());
+    let mut reader = png::Decoder::new(file).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let _ = std::fs::remove_file(&path);
+    // 4 × 2 m at 200 px/m from (20, 20), y up: (2.0, 0.5) lies on the segment.
+    let (c, r) = (20 + 2 * 200, 20 + 400 - 100);
+    let i = 3 * (r * info.width as usize + c);
+    assert_eq!([buf[i], buf[i + 1], buf[i + 2]], render::SMOOTHED_TRACK);
 }

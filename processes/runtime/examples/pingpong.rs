@@ -17,6 +17,7 @@ fn main() {
         rate_hz: 100.0,
         seed: None,
         takeover: false,
+        resume: None,
     };
     let a2 = args.clone();
     let echo = std::thread::spawn(move || {

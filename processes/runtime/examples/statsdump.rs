@@ -18,6 +18,7 @@ fn main() {
         rate_hz: 100.0,
         seed: None,
         takeover: false,
+        resume: None,
     };
     let ctx =
         Context::with_shutdown_flag("statsdump", &args, Arc::new(AtomicBool::new(false))).unwrap();

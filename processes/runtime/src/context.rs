@@ -33,10 +33,14 @@ pub struct CommonArgs {
     /// Seed override (the scenario's seed otherwise).
     #[arg(long, env = env::SEED)]
     pub seed: Option<u64>,
-    /// Go on from the last output of the process this one replaces or restarts (set by the
-    /// launcher on a swap or a restart).
+    /// Go on from the last output of the process this one replaces (set by the launcher on a
+    /// swap).
     #[arg(long, env = env::TAKEOVER, default_value_t = false)]
     pub takeover: bool,
+    /// Go on from the last outputs, kept in this directory, of the process this one restarts
+    /// after a crash (set by the launcher on a restart).
+    #[arg(long, env = env::RESUME)]
+    pub resume: Option<std::path::PathBuf>,
 }
 
 type PubSubFactory<M> =
@@ -57,6 +61,9 @@ pub struct Context {
     last_stats: Instant,
     steps: u64,
     takeover: bool,
+    resume: Option<std::path::PathBuf>,
+    /// This process's publishers (those still alive), for [`Context::offer_history`].
+    history_offers: std::cell::RefCell<Vec<std::rc::Weak<dyn crate::ports::OfferHistory>>>,
 }
 
 /// Lockstep: how long a publisher waits for a subscriber whose queue is full before it drops
@@ -98,6 +105,8 @@ impl Context {
             last_stats: Instant::now(),
             steps: 0,
             takeover: args.takeover,
+            resume: args.resume.clone(),
+            history_offers: Default::default(),
         };
         ctx.stats_publisher = Some(ctx.publisher(topics::STACK_STATS)?);
         Ok(ctx)
@@ -124,6 +133,30 @@ impl Context {
     pub fn takes_over(&self) -> bool {
         self.takeover
     }
+    /// Where the launcher kept the last outputs of the process this one restarts after a crash
+    /// (`MOLE_RESUME`).
+    pub fn resume_dir(&self) -> Option<&std::path::Path> {
+        self.resume.as_deref()
+    }
+    /// Hands every publisher's history to the subscribers that joined since it last sent, and
+    /// wakes them. A lockstep process calls it while it waits: a process restarted after a
+    /// crash missed the step that was sent while it was down, and the one that sent it has
+    /// nothing new to send until that step is answered; the history (one sample, see the topic
+    /// table) is that step.
+    pub fn offer_history(&self) {
+        let mut offers = self.history_offers.borrow_mut();
+        offers.retain(|offer| match offer.upgrade() {
+            Some(publisher) => {
+                publisher.update_connections();
+                true
+            }
+            None => false,
+        });
+    }
+    /// Publishes no statistics from now on (a helper of the launcher, not a role).
+    pub fn silence_stats(&mut self) {
+        self.stats_publisher = None;
+    }
     /// Whether SIGINT or SIGTERM arrived.
     pub fn shutdown_requested(&self) -> bool {
         self.shutdown.load(Ordering::SeqCst)
@@ -145,25 +178,34 @@ impl Context {
         &self.node
     }
 
-    fn service_name(&self, topic: &str) -> Result<ServiceName, RuntimeError> {
-        let full = topics::service_name(&self.namespace, topic);
+    /// `mole/<namespace>/<topic>` as an iceoryx2 service name.
+    fn service_name(namespace: &str, topic: &str) -> Result<ServiceName, RuntimeError> {
+        let full = topics::service_name(namespace, topic);
         full.as_str()
             .try_into()
             .map_err(|e| RuntimeError::Name(full.clone(), format!("{e:?}")))
     }
 
-    fn open_services<M: Message>(
+    /// The publish-subscribe service `mole/<namespace>/<topic>`, with the exact payload layout
+    /// of `M`. `offer`: a topic offered to peers, whose queues drop their oldest sample in every
+    /// clock mode; the others drop it in realtime and make the publisher wait in lockstep.
+    fn open_pubsub<M: Message>(
         &self,
+        namespace: &str,
         topic: &Topic<M>,
-    ) -> Result<(PubSubFactory<M>, EventFactory), RuntimeError> {
-        let name = self.service_name(topic.name)?;
+        offer: bool,
+    ) -> Result<PubSubFactory<M>, RuntimeError> {
+        let name = Self::service_name(namespace, topic.name)?;
         let failed = |reason: String| RuntimeError::Service {
-            topic: topic.name.to_string(),
+            topic: match offer {
+                true => topics::service_name(namespace, topic.name),
+                false => topic.name.to_string(),
+            },
             reason,
         };
         // Lockstep never drops: a full subscriber queue makes the publisher wait. Realtime
         // drops the oldest sample, so a slow subscriber never stalls the pipeline.
-        let lockstep = self.mode == ClockMode::Lockstep;
+        let safe_overflow = offer || self.mode != ClockMode::Lockstep;
         let pubsub = self
             .node
             .service_builder(&name)
@@ -173,14 +215,21 @@ impl Context {
             .subscriber_max_borrowed_samples(2)
             .max_publishers(topic.max_publishers)
             .max_subscribers(topic.max_subscribers)
-            .enable_safe_overflow(!lockstep)
+            .enable_safe_overflow(safe_overflow)
             .open_or_create()
             .map_err(|e| {
-                failed(describe_open_error(
-                    &format!("{e:?}"),
-                    &PayloadLayout::of::<M>(),
-                    recorded_payload(&name).as_ref(),
-                ))
+                let debug = format!("{e:?}");
+                failed(if offer && debug.contains("IncompatibleOverflowBehavior") {
+                    "it is an ordinary topic of that stack, whose full queue makes its publisher \
+                     wait in lockstep; a peer reads only what a robot offers to peers"
+                        .to_string()
+                } else {
+                    describe_open_error(
+                        &debug,
+                        &PayloadLayout::of::<M>(),
+                        recorded_payload(&name).as_ref(),
+                    )
+                })
             })?;
         // iceoryx2 opens a service whose payload has our type name and size but a stricter
         // alignment; that is still another layout (another language's definition), so refuse
@@ -190,25 +239,41 @@ impl Context {
         if (found.size, found.alignment) != (ours.size, ours.alignment) {
             return Err(failed(layout_mismatch(&ours, &found)));
         }
-        let event = self
-            .node
+        Ok(pubsub)
+    }
+
+    /// The event service that wakes the subscribers of `mole/<namespace>/<topic>`.
+    fn open_event<M: Message>(
+        &self,
+        namespace: &str,
+        topic: &Topic<M>,
+    ) -> Result<EventFactory, RuntimeError> {
+        let name = Self::service_name(namespace, topic.name)?;
+        self.node
             .service_builder(&name)
             .event()
             .max_notifiers(topic.max_publishers + 2)
             .max_listeners(topic.max_subscribers + 2)
             .open_or_create()
-            .map_err(|e| failed(format!("event service: {e:?}")))?;
-        Ok((pubsub, event))
+            .map_err(|e| RuntimeError::Service {
+                topic: topic.name.to_string(),
+                reason: format!("event service: {e:?}"),
+            })
     }
 
-    /// A publisher on `topic`, with the event that wakes its subscribers.
-    pub fn publisher<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
-        let (pubsub, event) = self.open_services(&topic)?;
+    /// A publisher on `pubsub`, with the notifier of `event`. `waits`: for a full queue, as a
+    /// lockstep publisher does.
+    fn publisher_on<M: Message>(
+        &self,
+        topic: &Topic<M>,
+        pubsub: PubSubFactory<M>,
+        event: EventFactory,
+        waits: bool,
+    ) -> Result<Publisher<M>, RuntimeError> {
         let port_failed =
             |e: String| RuntimeError::Port(format!("publisher on {}: {e}", topic.name));
-        let lockstep = self.mode == ClockMode::Lockstep;
         let mut builder = pubsub.publisher_builder().max_loaned_samples(2);
-        if lockstep {
+        if waits {
             // Lockstep waits for a full queue (that is what makes it deterministic), but not
             // forever: a consumer that reads nothing for STUCK_CONSUMER (frozen, or gone while
             // its queue was full) loses this sample instead of stopping the whole stack, and a
@@ -242,13 +307,58 @@ impl Context {
             .stats
             .register(topic.name, true)
             .map_err(|e| port_failed(format!("{e:?}")))?;
-        Ok(Publisher {
+        Ok(Publisher::new(topic.name, publisher, notifier, stats))
+    }
+
+    /// A subscriber on `pubsub`; it wakes the process through a listener on `event` if given.
+    fn subscriber_on<M: Message>(
+        &self,
+        topic: &Topic<M>,
+        pubsub: PubSubFactory<M>,
+        event: Option<EventFactory>,
+    ) -> Result<Subscriber<M>, RuntimeError> {
+        let port_failed =
+            |e: String| RuntimeError::Port(format!("subscriber on {}: {e}", topic.name));
+        let subscriber = pubsub
+            .subscriber_builder()
+            .buffer_size(topic.buffer)
+            .create()
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        let listener = match event {
+            Some(event) => Some(Rc::new(
+                event
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| port_failed(format!("{e:?}")))?,
+            )),
+            None => None,
+        };
+        let stats = self
+            .stats
+            .register(topic.name, false)
+            .map_err(|e| port_failed(format!("{e:?}")))?;
+        Ok(Subscriber {
             topic: topic.name,
-            publisher,
-            notifier,
+            subscriber: Rc::new(subscriber),
+            listener,
             stats,
-            seq: 0,
+            latest: None,
+            pending: [None, None],
+            last_seq: None,
+            last_warning: None,
         })
+    }
+
+    /// A publisher on `topic`, with the event that wakes its subscribers.
+    pub fn publisher<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
+        let pubsub = self.open_pubsub(&self.namespace, &topic, false)?;
+        let event = self.open_event(&self.namespace, &topic)?;
+        let lockstep = self.mode == ClockMode::Lockstep;
+        let publisher = self.publisher_on(&topic, pubsub, event, lockstep)?;
+        self.history_offers
+            .borrow_mut()
+            .push(publisher.history_offer());
+        Ok(publisher)
     }
 
     /// A subscriber on `topic`, with the listener its WaitSet sleeps on.
@@ -272,37 +382,9 @@ impl Context {
         topic: Topic<M>,
         wakes: bool,
     ) -> Result<Subscriber<M>, RuntimeError> {
-        let (pubsub, event) = self.open_services(&topic)?;
-        let port_failed =
-            |e: String| RuntimeError::Port(format!("subscriber on {}: {e}", topic.name));
-        let subscriber = pubsub
-            .subscriber_builder()
-            .buffer_size(topic.buffer)
-            .create()
-            .map_err(|e| port_failed(format!("{e:?}")))?;
-        let listener = if wakes {
-            let listener = event
-                .listener_builder()
-                .create()
-                .map_err(|e| port_failed(format!("{e:?}")))?;
-            Some(Rc::new(listener))
-        } else {
-            None
-        };
-        let stats = self
-            .stats
-            .register(topic.name, false)
-            .map_err(|e| port_failed(format!("{e:?}")))?;
-        Ok(Subscriber {
-            topic: topic.name,
-            subscriber: Rc::new(subscriber),
-            listener,
-            stats,
-            latest: None,
-            pending: [None, None],
-            last_seq: None,
-            last_warning: None,
-        })
+        let pubsub = self.open_pubsub(&self.namespace, &topic, false)?;
+        let event = self.open_event(&self.namespace, &topic)?;
+        self.subscriber_on(&topic, pubsub, wakes.then_some(event))
     }
 
     /// A replacement's hand-over (`mole swap` sets `MOLE_TAKEOVER`): waits up to `grace` for
@@ -471,5 +553,42 @@ fn describe_open_error(debug: &str, ours: &PayloadLayout, found: Option<&Payload
         "the service was created by a process built against another iceoryx2 version".to_string()
     } else {
         debug.to_string()
+    }
+}
+
+/// Ports between robots: a robot offers a topic to other robots' stacks (other namespaces on
+/// the same machine) and they read it. The offer's queues drop their oldest sample when full, in
+/// lockstep too, so neither robot's loop ever waits for the other's: each runs its own clock.
+impl Context {
+    /// A publisher offering `topic` to other robots, as `mole/<namespace>/<topic>`. Unlike
+    /// [`Context::publisher`] it never waits for a full queue, whatever the clock mode: a reader
+    /// in another robot that is slower, not stepping yet, finished or frozen loses its oldest
+    /// sample instead of holding this robot back.
+    pub fn peer_publisher<M: Message>(
+        &self,
+        topic: Topic<M>,
+    ) -> Result<Publisher<M>, RuntimeError> {
+        let pubsub = self.open_pubsub(&self.namespace, &topic, true)?;
+        let event = self.open_event(&self.namespace, &topic)?;
+        self.publisher_on(&topic, pubsub, event, false)
+    }
+
+    /// A passive subscriber on `topic` as the robot in namespace `peer` offers it
+    /// ([`Context::peer_publisher`]): it never wakes this process, and its queue can never hold
+    /// the peer back. It may come before the peer's stack does; it reads nothing until then.
+    /// Refused for this robot's own namespace (a peer is another robot) and for a topic the peer
+    /// publishes as an ordinary lockstep topic, whose full queue would make the peer wait.
+    pub fn peer_subscriber<M: Message>(
+        &self,
+        peer: &str,
+        topic: Topic<M>,
+    ) -> Result<Subscriber<M>, RuntimeError> {
+        if peer == self.namespace {
+            return Err(RuntimeError::Setting(format!(
+                "peer `{peer}` is this robot's own namespace: a peer is another robot's stack"
+            )));
+        }
+        let pubsub = self.open_pubsub(peer, &topic, true)?;
+        self.subscriber_on(&topic, pubsub, None)
     }
 }

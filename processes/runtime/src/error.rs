@@ -17,6 +17,8 @@ pub enum RuntimeError {
     Signal(String),
     #[error("{0}")]
     Setting(String),
+    #[error("cannot resume from {path}: {reason}", path = .0.display(), reason = .1)]
+    Resume(std::path::PathBuf, String),
 }
 
 /// Input a process refuses (a goal-seeking planner without a goal...): exit code 2, which no
@@ -34,7 +36,7 @@ pub fn exit_code(result: Result<(), Box<dyn std::error::Error>>) -> std::process
             if e.is::<BadInput>()
                 || matches!(
                     e.downcast_ref::<RuntimeError>(),
-                    Some(RuntimeError::Setting(_))
+                    Some(RuntimeError::Setting(_) | RuntimeError::Resume(..))
                 ) =>
         {
             eprintln!("error: {e}");

@@ -18,13 +18,65 @@ const WARN_EVERY: Duration = Duration::from_secs(5);
 /// A typed publisher bound to one topic.
 pub struct Publisher<M: Message> {
     pub(crate) topic: &'static str,
-    pub(crate) publisher: iceoryx2::port::publisher::Publisher<ipc::Service, M, ()>,
-    pub(crate) notifier: Notifier<ipc::Service>,
+    /// Shared with the context, which offers late subscribers the history while the process
+    /// waits ([`crate::Context::offer_history`]).
+    ports: Rc<PublisherPorts<M>>,
     pub(crate) stats: PortHandle,
     pub(crate) seq: u64,
 }
 
+/// A publisher's iceoryx2 ports.
+pub(crate) struct PublisherPorts<M: Message> {
+    topic: &'static str,
+    publisher: iceoryx2::port::publisher::Publisher<ipc::Service, M, ()>,
+    notifier: Notifier<ipc::Service>,
+}
+
+/// A publisher that can hand its history to subscribers that joined since it last sent.
+pub(crate) trait OfferHistory {
+    fn update_connections(&self);
+}
+
+impl<M: Message> OfferHistory for PublisherPorts<M> {
+    fn update_connections(&self) {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        match self.publisher.update_connections() {
+            Ok(()) => {
+                let _ = self.notifier.notify();
+            }
+            Err(e) => tracing::debug!(topic = self.topic, "update_connections failed: {e:?}"),
+        }
+    }
+}
+
 impl<M: Message> Publisher<M> {
+    pub(crate) fn new(
+        topic: &'static str,
+        publisher: iceoryx2::port::publisher::Publisher<ipc::Service, M, ()>,
+        notifier: Notifier<ipc::Service>,
+        stats: PortHandle,
+    ) -> Self {
+        Self {
+            topic,
+            ports: Rc::new(PublisherPorts {
+                topic,
+                publisher,
+                notifier,
+            }),
+            stats,
+            seq: 0,
+        }
+    }
+
+    /// The ports, for the context's list of publishers that offer history.
+    pub(crate) fn history_offer(&self) -> std::rc::Weak<dyn OfferHistory>
+    where
+        M: 'static,
+    {
+        let ports: Rc<dyn OfferHistory> = self.ports.clone();
+        Rc::downgrade(&ports)
+    }
+
     /// Loans a sample in shared memory, lets `fill` write the payload in place, stamps the
     /// header (`seq`, `tick`, `stamp_ns`, `origin_ns`), sends it and wakes the subscribers.
     ///
@@ -36,7 +88,7 @@ impl<M: Message> Publisher<M> {
         origin_ns: u64,
         fill: impl FnOnce(&mut M),
     ) -> Result<(), RuntimeError> {
-        let sample = match self.publisher.loan_uninit() {
+        let sample = match self.ports.publisher.loan_uninit() {
             Ok(sample) => sample,
             Err(e) => {
                 self.stats.dropped(1);
@@ -60,7 +112,7 @@ impl<M: Message> Publisher<M> {
         }
         self.seq += 1;
         self.stats.counted(None);
-        if let Err(e) = self.notifier.notify() {
+        if let Err(e) = self.ports.notifier.notify() {
             tracing::debug!(topic = self.topic, "notify failed: {e:?}");
         }
         Ok(())
@@ -69,13 +121,7 @@ impl<M: Message> Publisher<M> {
     /// Connects subscribers that appeared since the last send and delivers them the history
     /// (world/map keeps one sample for late joiners); wakes them if anything was delivered.
     pub fn update_connections(&self) {
-        use iceoryx2::port::update_connections::UpdateConnections;
-        match self.publisher.update_connections() {
-            Ok(()) => {
-                let _ = self.notifier.notify();
-            }
-            Err(e) => tracing::debug!(topic = self.topic, "update_connections failed: {e:?}"),
-        }
+        self.ports.update_connections();
     }
 
     /// The topic name (without the namespace).

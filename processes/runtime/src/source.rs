@@ -42,7 +42,9 @@ type BoxError = Box<dyn std::error::Error>;
 impl Process {
     /// Runs the clock (docs/architecture.md, "Clock modes"). Realtime: one step per period with
     /// the newest reply. Lockstep: step k+1 only once the reply for step k arrived; a later
-    /// answer to an older step never counts.
+    /// answer to an older step never counts. A clock restarted after a crash, resumed from step
+    /// k (`resume_from`), goes on with step k+1 at once and without a reply: the reply to step
+    /// k went to its predecessor, and every consumer has handled step k already.
     pub fn run_clock<M: Message>(
         mut self,
         reply: Trigger<M>,
@@ -54,11 +56,23 @@ impl Process {
         self.ctx.ready();
         let mode = self.ctx.mode();
         let period = Duration::from_secs_f64(1.0 / self.ctx.rate_hz().max(1e-3));
-        let mut tick = 0;
+        let mut tick = self.resume_after.unwrap_or(0);
         let mut latency_ns = 0;
         let mut received = Instant::now();
         let mut applied: Option<u64> = None;
-        if on(ClockEvent::Publish { tick })? == Flow::End {
+        let first = match self.resume_after {
+            None => ClockEvent::Publish { tick },
+            Some(_) => {
+                (applied, tick) = (Some(tick), tick + 1);
+                self.ctx.count_step();
+                ClockEvent::Advance {
+                    tick,
+                    reply: None,
+                    latency_ns: 0,
+                }
+            }
+        };
+        if on(first)? == Flow::End {
             return Ok(());
         }
         let (mut next_step, mut last_publish) = (Instant::now() + period, Instant::now());

@@ -31,6 +31,9 @@ pub const TAKEOVER_GRACE: Duration = Duration::from_secs(1);
 
 /// Lockstep: a step held this long with its trigger but not its other inputs is reported.
 const INCOMPLETE_WARNING: Duration = Duration::from_secs(2);
+/// Lockstep: how long a step waits for a previous-tick input whose step k−1 was passed over
+/// before it goes on without it (see `Gate::passed_over`).
+const PASSED_OVER_GRACE: Duration = Duration::from_millis(300);
 
 type BoxError = Box<dyn std::error::Error>;
 
@@ -95,6 +98,8 @@ pub struct Start<'a> {
 pub struct Step<'a> {
     tick: u64,
     origin_ns: u64,
+    /// The tick this process handled last, or resumed after.
+    previous: Option<u64>,
     ports: &'a [Box<dyn Port>],
 }
 
@@ -102,6 +107,14 @@ impl Step<'_> {
     /// The step's tick k.
     pub fn tick(&self) -> u64 {
         self.tick
+    }
+
+    /// Ticks from the step this process handled last (or resumed after) to this one: 1 when
+    /// none went by unhandled; more after a gap (a producer that crashed, this process
+    /// restarted, a realtime step skipped under load); `None` on the first step of a fresh
+    /// start.
+    pub fn ticks_since_last(&self) -> Option<u64> {
+        self.previous.map(|p| self.tick.saturating_sub(p))
     }
 
     /// The trigger's `origin_ns`: the stamp of the ground truth this step derives from, to pass
@@ -232,7 +245,7 @@ pub struct Process {
     /// The trigger: an index into `ports`, and how it is read.
     trigger: Option<(usize, Order)>,
     pub(crate) wakers: Vec<Waker>,
-    resume_after: Option<u64>,
+    pub(crate) resume_after: Option<u64>,
 }
 
 impl Process {
@@ -266,12 +279,13 @@ impl Process {
         &self.ctx
     }
 
-    /// When this process takes over from another (a swap or a restart, `MOLE_TAKEOVER`): waits
-    /// up to [`TAKEOVER_GRACE`] for that one's last sample of `topic`, one of this process's own
-    /// outputs, and returns a copy; `None` when none came (it starts afresh) or when it does
-    /// not take over. Declare these before any input: a lockstep publisher waits while a queue
-    /// is full, so an input not read while waiting here would stop the stack. The process then
-    /// resumes after the tick of the last one taken.
+    /// The last sample of `topic`, one of this process's own outputs, published by the process
+    /// this one follows, as a copy; the process then resumes after its tick. After a crash
+    /// (`MOLE_RESUME`) it is the one the launcher kept; on a swap (`MOLE_TAKEOVER`) it waits up
+    /// to [`TAKEOVER_GRACE`] for the predecessor, which still runs, to publish one. `None` when
+    /// there is none (it starts afresh) or when this process follows none. Declare these before
+    /// any input: a lockstep publisher waits while a queue is full, so an input not read while
+    /// waiting here would stop the stack.
     pub fn resume_from<M: Message>(
         &mut self,
         topic: Topic<M>,
@@ -281,6 +295,25 @@ impl Process {
                 "resume_from({}) comes after an input was declared: declare it first",
                 topic.name
             )));
+        }
+        if let Some(dir) = self.ctx.resume_dir() {
+            let kept = crate::keep::read_resume_file(dir, topic)?;
+            match &kept {
+                Some(message) => {
+                    let tick = message.header().tick;
+                    tracing::info!(
+                        topic = topic.name,
+                        tick,
+                        "resumed from the last output kept"
+                    );
+                    self.resume_after = Some(tick);
+                }
+                None => tracing::warn!(
+                    topic = topic.name,
+                    "no last output was kept (none published before the crash): starting afresh"
+                ),
+            }
+            return Ok(kept);
         }
         if !self.ctx.takes_over() {
             return Ok(None);
@@ -420,6 +453,7 @@ impl Process {
         let mut gate = Gate::new(self.ctx.mode(), self.resume_after);
         let mut init = Some(init);
         let mut state = None;
+        let mut handled = self.resume_after;
         loop {
             if waitset.wait(&mut self.ctx, None)? == Wake::Shutdown {
                 return Ok(());
@@ -453,12 +487,45 @@ impl Process {
                     &Step {
                         tick: k,
                         origin_ns,
+                        previous: handled,
                         ports: &self.ports,
                     },
                 )?;
+                handled = Some(k);
                 self.ctx.count_step();
             }
         }
+    }
+}
+
+/// Inputs from and outputs to other robots' stacks (other namespaces on the same machine).
+impl Process {
+    /// Declares an input read from another robot: `topic` as the robot in namespace `peer`
+    /// offers it ([`Process::peer_output`]). Read by [`Rule::Newest`]: it never wakes this
+    /// process and never gates a step (the peer runs its own clock), and each step drains its
+    /// queue; a queue that fills anyway (this robot not stepping) drops its oldest sample, so it
+    /// never holds the peer back either. Nothing is read until the peer's stack publishes.
+    pub fn peer_input<M: Message>(
+        &mut self,
+        peer: &str,
+        topic: Topic<M>,
+    ) -> Result<In<M>, RuntimeError> {
+        let subscriber = self.ctx.peer_subscriber(peer, topic)?;
+        self.ports.push(Box::new(Input {
+            subscriber,
+            rule: Rule::Newest,
+            lockstep: self.ctx.mode() == ClockMode::Lockstep,
+        }));
+        Ok(In {
+            index: self.ports.len() - 1,
+            _message: PhantomData,
+        })
+    }
+
+    /// A publisher offering `topic` to other robots (see [`Context::peer_publisher`]): it never
+    /// waits for a reader, in lockstep either.
+    pub fn peer_output<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
+        self.ctx.peer_publisher(topic)
     }
 }
 
@@ -503,6 +570,7 @@ struct Gate {
     skipped: u64,
     incomplete: Option<(u64, Instant)>,
     warned: bool,
+    passed_over_grace: Duration,
 }
 
 impl Gate {
@@ -513,7 +581,43 @@ impl Gate {
             skipped: 0,
             incomplete: None,
             warned: false,
+            passed_over_grace: PASSED_OVER_GRACE,
         }
+    }
+
+    /// When step k was first found incomplete.
+    fn held_since(&mut self, k: u64) -> Instant {
+        match self.incomplete {
+            Some((held, since)) if held == k => since,
+            _ => self.incomplete.insert((k, Instant::now())).1,
+        }
+    }
+
+    /// Whether step k, complete but for previous-tick inputs whose step k−1 was passed over
+    /// (a later sample is in), has waited [`PASSED_OVER_GRACE`] for them: a process that joined
+    /// a run is handed only its inputs' newest sample, and a producer restarted after a crash
+    /// goes on past the step it lost, so that step k−1 will not come and the step goes on with
+    /// the input's older sample. The grace keeps a swap, whose two producers may deliver k
+    /// before k−1, deterministic.
+    fn passed_over(&mut self, k: u64, trigger: usize, ports: &[Box<dyn Port>]) -> bool {
+        let mut any = false;
+        for (i, p) in ports.iter().enumerate() {
+            if i == trigger || p.gate_tick(k) == Some(k) {
+                continue;
+            }
+            if p.rule() != Rule::PreviousTick || p.newest_seen().is_none_or(|t| t < k) {
+                return false;
+            }
+            any = true;
+        }
+        if !any || self.held_since(k).elapsed() < self.passed_over_grace {
+            return false;
+        }
+        tracing::warn!(
+            tick = k,
+            "lockstep: step {k} goes on without a previous step's input that was passed over"
+        );
+        true
     }
 
     fn due(&mut self, k: u64, trigger: usize, ports: &[Box<dyn Port>]) -> Due {
@@ -528,7 +632,7 @@ impl Gate {
             .iter()
             .enumerate()
             .all(|(i, p)| i == trigger || p.gate_tick(k) == Some(k));
-        if complete {
+        if complete || self.passed_over(k, trigger, ports) {
             if self.skipped > 0 {
                 tracing::info!(
                     skipped = self.skipped,
@@ -552,10 +656,7 @@ impl Gate {
             return Due::Skip;
         }
         // Held this long without its inputs: a step that cannot complete; say what is missing.
-        let since = match self.incomplete {
-            Some((held, since)) if held == k => since,
-            _ => self.incomplete.insert((k, Instant::now())).1,
-        };
+        let since = self.held_since(k);
         if since.elapsed() > INCOMPLETE_WARNING && !self.warned {
             self.warned = true;
             let missing: Vec<&str> = ports
@@ -777,6 +878,24 @@ mod tests {
             "not yet",
             "tick k of a previous-tick input is not k−1"
         );
+    }
+
+    /// A previous-tick input whose step k−1 was passed over (only k came: a process that
+    /// joined gets the newest sample) holds step k for the grace, then lets it go on.
+    #[test]
+    fn lockstep_previous_tick_passed_over_goes_on_after_the_grace() {
+        let mut gate = Gate::new(ClockMode::Lockstep, None);
+        let mut p = ports(&[(Rule::SameTick, Some(5)), (Rule::PreviousTick, None)]);
+        let grid = p[1].as_any_mut().downcast_mut::<TableInput>().unwrap();
+        grid.seen = Some(5);
+        assert_eq!(due(&mut gate, 5, &p), "not yet", "within the grace");
+        gate.passed_over_grace = Duration::ZERO;
+        assert_eq!(due(&mut gate, 5, &p), "step");
+        // Not passed over (nothing later seen): still waited for.
+        let mut gate = Gate::new(ClockMode::Lockstep, None);
+        gate.passed_over_grace = Duration::ZERO;
+        let p = ports(&[(Rule::SameTick, Some(5)), (Rule::PreviousTick, Some(3))]);
+        assert_eq!(due(&mut gate, 5, &p), "not yet");
     }
 
     #[test]

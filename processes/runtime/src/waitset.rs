@@ -136,10 +136,6 @@ impl WaitSet {
             let until_stats = ctx.tick_stats();
             let now = Instant::now();
             let until_deadline = deadline.map(|d| d.saturating_duration_since(now));
-            if until_deadline == Some(Duration::ZERO) {
-                self.drain_listeners();
-                return Ok(Wake::Timeout);
-            }
             // poll(2) waits in whole milliseconds: the last fraction of a deadline is slept
             // precisely, so a 100 Hz world ticks on time.
             if let Some(left) = until_deadline
@@ -147,6 +143,11 @@ impl WaitSet {
             {
                 std::thread::sleep(left);
                 self.drain_listeners();
+                // Idle in lockstep: a subscriber that joined late (a restart) may be waiting
+                // for a step this process sent before it came.
+                if ctx.mode() == ClockMode::Lockstep {
+                    ctx.offer_history();
+                }
                 return Ok(Wake::Timeout);
             }
             let timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));

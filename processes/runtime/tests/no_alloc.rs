@@ -89,6 +89,7 @@ fn publish_wait_receive_allocates_nothing_per_step() {
             rate_hz: 100.0,
             seed: None,
             takeover: false,
+            resume: None,
         };
         // Planner and world close the loop: command out, odometry back.
         let mut planner = context("planner", &args);

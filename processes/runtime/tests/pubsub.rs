@@ -15,6 +15,7 @@ fn args(test: &str, mode: ClockMode) -> CommonArgs {
         rate_hz: 100.0,
         seed: None,
         takeover: false,
+        resume: None,
     }
 }
 

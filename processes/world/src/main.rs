@@ -40,12 +40,18 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         load_scenario(&args.scenario).map_err(|e| mole_runtime::BadInput(e.to_string()))?;
     scenario.seed = args.common.seed.unwrap_or(scenario.seed);
     let mut p = Process::new("world", &args.common)?;
+    // Restarted after a crash: the run goes on from the last truth (the step after it is taken
+    // with the robot stopped, the command to it having gone to the dead world).
+    let truth_was = p.resume_from(topics::WORLD_TRUTH)?;
     let cmd = p.trigger(topics::PLANNING_CMD, Order::Newest)?;
     let mut map_out = p.output(topics::WORLD_MAP)?;
     let mut truth_out = p.output(topics::WORLD_TRUTH)?;
     let mut tick_out = p.output(topics::STACK_TICK)?;
     let mode = p.context().mode();
-    let mut world = World::new(&scenario);
+    let mut world = match truth_was {
+        Some(truth) => World::resume(&scenario, &truth),
+        None => World::new(&scenario),
+    };
     map_out.publish(0, now_ns(), |map| scenario.write_world_map(map))?;
 
     p.run_clock(cmd, |event| {

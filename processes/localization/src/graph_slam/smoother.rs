@@ -16,21 +16,27 @@
 //!   on the step count only, so the same readings give the same solutions.
 //! - The landmarks (`localization/landmarks`) are republished every step: for each landmark of
 //!   the front-end's map, the smoother's mean and marginal covariance from its newest finished
-//!   solve when that solve has it, else the front-end's. The smoothed trajectory stays in the
-//!   smoother; its newest pose is [`GraphSlamEstimator::smoothed_pose`].
+//!   solve when that solve has it, else the front-end's.
+//! - The smoothed trajectory (`localization/trajectory`) is published after each finished solve
+//!   that the step took over: every pose of the graph but its anchor, each with the tick of the
+//!   step whose odometry reached it ([`Estimator::write_trajectory`]). Its newest pose is also
+//!   [`GraphSlamEstimator::smoothed_pose`].
 //! - When the queue overflows (the smoother fell [`QUEUE_STEPS`] steps behind) or the graph is
 //!   full, the smoother stops for the rest of the run (logged once), and the landmarks are the
 //!   front-end's from then on.
 //!
 //! The step path allocates nothing. The smoother's graph and solver workspace are reserved up
 //! front; its symbolic factorisation (faer) is redone, with allocation, on the smoother thread
-//! after the graph grew.
+//! after the graph grew. The trajectory travels in three buffers reserved for the whole graph:
+//! the smoother fills its own, swaps it with the posted one under the lock, and the step swaps
+//! the posted one with the estimator's, so neither side copies under the lock.
 
 use super::{GraphCapacity, GraphSlamConfig, PoseGraph};
 use crate::slam::{Association, EkfSlamEstimator, SLAM_CAPACITY, write_landmarks};
 use crate::{Estimator, LocalizationError, Readings};
 use mole_types::{
-    BeaconReading, EstimatorKind, Landmarks, MAX_BEACONS, Odom, Pose, Pose2, WorldMap,
+    BeaconReading, EstimatorKind, Landmarks, MAX_BEACONS, MAX_TRAJECTORY_POSES, Odom, Pose, Pose2,
+    Trajectory, TrajectoryPose, WorldMap,
 };
 use nalgebra::{Matrix2, Vector2, Vector3};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
@@ -48,6 +54,12 @@ pub const SOLVE_EVERY: usize = 100;
 pub const SOLVE_ITERATIONS: usize = 10;
 /// Steps the queue to the smoother holds.
 pub const QUEUE_STEPS: usize = 1024;
+
+// Every pose of the graph but its anchor fits in one `localization/trajectory` message.
+const _: () = assert!(SMOOTHER_POSES - 1 <= MAX_TRAJECTORY_POSES);
+
+/// A smoothed pose (x, y, θ) with the tick of the step whose odometry reached it.
+type StampedPose = (u64, Vector3<f64>);
 
 /// One step as the smoother needs it.
 #[derive(Debug, Clone, Copy)]
@@ -86,6 +98,8 @@ struct Posted {
     pose: Vector3<f64>,
     /// Per landmark of the graph: (front-end slot, mean, marginal covariance).
     landmarks: Vec<(usize, Vector2<f64>, Matrix2<f64>)>,
+    /// The smoothed trajectory, the anchor left out (swapped in and out, never copied).
+    trajectory: Vec<StampedPose>,
     /// The graph is full: no more solutions.
     stopped: bool,
 }
@@ -104,6 +118,8 @@ pub struct GraphSlamEstimator {
     /// The newest solution's landmarks by front-end slot.
     smoothed: Vec<Option<(Vector2<f64>, Matrix2<f64>)>>,
     smoothed_pose: Option<(u64, Pose2)>,
+    /// The newest solution's trajectory.
+    trajectory: Vec<StampedPose>,
     solves: u64,
     live: bool,
 }
@@ -160,6 +176,7 @@ impl GraphSlamEstimator {
             steps: 0,
             pose: Vector3::zeros(),
             landmarks: Vec::with_capacity(SLAM_CAPACITY),
+            trajectory: Vec::with_capacity(SMOOTHER_POSES),
             stopped: false,
         }));
         let shared = Arc::clone(&posted);
@@ -182,6 +199,7 @@ impl GraphSlamEstimator {
             pending: false,
             smoothed: vec![None; SLAM_CAPACITY],
             smoothed_pose: None,
+            trajectory: Vec::with_capacity(SMOOTHER_POSES),
             solves: 0,
             live: true,
         })
@@ -259,7 +277,7 @@ impl GraphSlamEstimator {
         } else {
             self.posted.try_lock().ok()
         };
-        let Some(posted) = guard else {
+        let Some(mut posted) = guard else {
             return;
         };
         if posted.stopped && self.live {
@@ -281,6 +299,7 @@ impl GraphSlamEstimator {
                 *entry = Some((mean, cov));
             }
         }
+        std::mem::swap(&mut self.trajectory, &mut posted.trajectory);
     }
 }
 
@@ -375,6 +394,41 @@ impl Estimator for GraphSlamEstimator {
             });
         write_landmarks(EstimatorKind::GraphSlam, landmarks, out)
     }
+
+    fn smoother_solves(&self) -> u64 {
+        self.solves
+    }
+
+    /// The newest solution's trajectory, ticks counted from its first pose's; a pose whose tick
+    /// does not come after the one before (a restarted world) or lies 2³² steps on is left out.
+    fn write_trajectory(&self, out: &mut Trajectory) -> bool {
+        let first_tick = self.trajectory.first().map_or(0, |&(tick, _)| tick);
+        let mut n = 0;
+        let mut previous = None;
+        for &(tick, pose) in &self.trajectory {
+            let offset = tick
+                .checked_sub(first_tick)
+                .and_then(|d| u32::try_from(d).ok());
+            let Some(offset) = offset.filter(|o| previous.is_none_or(|p| *o > p)) else {
+                continue;
+            };
+            let Some(slot) = out.poses.get_mut(n) else {
+                break;
+            };
+            *slot = TrajectoryPose {
+                tick_offset: offset,
+                x: pose[0] as f32,
+                y: pose[1] as f32,
+                theta: pose[2] as f32,
+            };
+            previous = Some(offset);
+            n += 1;
+        }
+        out.first_tick = first_tick;
+        out.n_poses = n as u32;
+        out.estimator = EstimatorKind::GraphSlam.code();
+        true
+    }
 }
 
 /// The smoother thread: adds each step to the graph, solves when due and posts the solution;
@@ -386,6 +440,9 @@ fn smooth(
     acknowledge: &SyncSender<()>,
 ) {
     let mut covariances = Vec::with_capacity(SLAM_CAPACITY);
+    // The tick of every pose but the anchor, and the trajectory being prepared for the post.
+    let mut ticks = Vec::with_capacity(SMOOTHER_POSES);
+    let mut trajectory = Vec::with_capacity(SMOOTHER_POSES);
     let mut since_solve = 0;
     let mut stopped = false;
     while let Ok(job) = jobs.recv() {
@@ -399,16 +456,28 @@ fn smooth(
                     }
                     continue;
                 }
-                add_step(&mut graph, &record);
+                add_step(&mut graph, &record, &mut ticks);
                 since_solve += 1;
                 if since_solve >= SOLVE_EVERY.max(graph.poses().len() / 10) {
-                    solve_and_post(&mut graph, &mut covariances, posted);
+                    solve_and_post(
+                        &mut graph,
+                        &ticks,
+                        &mut covariances,
+                        &mut trajectory,
+                        posted,
+                    );
                     since_solve = 0;
                 }
             }
             Job::Settle => {
                 if since_solve > 0 && !stopped {
-                    solve_and_post(&mut graph, &mut covariances, posted);
+                    solve_and_post(
+                        &mut graph,
+                        &ticks,
+                        &mut covariances,
+                        &mut trajectory,
+                        posted,
+                    );
                     since_solve = 0;
                 }
                 let _ = acknowledge.send(());
@@ -417,14 +486,16 @@ fn smooth(
     }
 }
 
-/// A new pose reached by the step's odometry (a refused control keeps the newest pose) and the
-/// step's readings from it. Refusals are counted by the graph.
-fn add_step(graph: &mut PoseGraph, record: &StepRecord) {
+/// A new pose reached by the step's odometry, its tick kept in `ticks` (a refused control keeps
+/// the newest pose), and the step's readings from it. Refusals are counted by the graph.
+fn add_step(graph: &mut PoseGraph, record: &StepRecord, ticks: &mut Vec<u64>) {
     let newest = graph.poses().len() - 1;
-    let at = record
-        .odom
-        .and_then(|odom| graph.add_pose(&odom).ok())
-        .unwrap_or(newest);
+    let added = record.odom.and_then(|odom| {
+        let at = graph.add_pose(&odom).ok()?;
+        ticks.push(odom.header.tick);
+        Some(at)
+    });
+    let at = added.unwrap_or(newest);
     for reading in &record.readings[..record.n_readings] {
         let _ = graph.add_observation(at, reading);
     }
@@ -433,19 +504,31 @@ fn add_step(graph: &mut PoseGraph, record: &StepRecord) {
     }
 }
 
-/// One solve from the current estimate, the landmark marginals, and the post.
+/// One solve from the current estimate, the landmark marginals, and the post; the trajectory
+/// is prepared in `trajectory` (pose i + 1 of the graph at `ticks[i]`) and swapped with the
+/// posted one.
 fn solve_and_post(
     graph: &mut PoseGraph,
+    ticks: &[u64],
     covariances: &mut Vec<Matrix2<f64>>,
+    trajectory: &mut Vec<StampedPose>,
     posted: &Mutex<Posted>,
 ) {
     if graph.optimize(SOLVE_ITERATIONS).is_err() || graph.landmark_covariances(covariances).is_err()
     {
         return;
     }
+    trajectory.clear();
+    trajectory.extend(
+        ticks
+            .iter()
+            .copied()
+            .zip(graph.poses()[1..].iter().copied()),
+    );
     let Ok(mut p) = posted.lock() else {
         return;
     };
+    std::mem::swap(&mut p.trajectory, trajectory);
     p.solves += 1;
     p.steps = (graph.poses().len() - 1) as u64;
     p.pose = graph.poses()[graph.poses().len() - 1];
@@ -457,5 +540,51 @@ fn solve_and_post(
         .zip(covariances.iter())
     {
         p.landmarks.push((slot as usize, mean, cov));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_support::zeroed_map;
+    use mole_types::Message;
+
+    /// The published trajectory holds every pose the odometry reached, each at its step's tick
+    /// (a skipped step included), and ends at the smoothed pose taken over.
+    #[test]
+    fn the_trajectory_carries_every_step_at_its_tick() {
+        let mut map = zeroed_map();
+        (map.start_x, map.start_y, map.dt) = (1.0, 1.0, 0.01);
+        (map.sensors.odom_v_std, map.sensors.odom_omega_std) = (0.05, 0.05);
+        let mut graph = GraphSlamEstimator::from_map(&map).expect("smoother starts");
+        let mut odom: Odom = bytemuck::Zeroable::zeroed();
+        (odom.v, odom.omega, odom.dt) = (0.5, 0.2, 0.01);
+        // Steps 40..=290, step 100 missed (a realtime step the process did not handle).
+        let ticks: Vec<u64> = (40..=290).filter(|&t| t != 100).collect();
+        for &tick in &ticks {
+            odom.header.tick = tick;
+            graph.step(&Readings {
+                odom: &odom,
+                beacons: None,
+                fix: None,
+            });
+        }
+        graph.settle();
+        assert!(graph.smoother_solves() > 0);
+        let mut out: Box<Trajectory> = bytemuck::zeroed_box();
+        assert!(graph.write_trajectory(&mut out));
+        assert_eq!(out.validate(), Ok(()));
+        assert_eq!(out.estimator, EstimatorKind::GraphSlam.code());
+        assert_eq!(out.first_tick, 40);
+        let published: Vec<u64> = out
+            .poses()
+            .iter()
+            .map(|p| out.first_tick + u64::from(p.tick_offset))
+            .collect();
+        assert_eq!(published, ticks);
+        let (steps, newest) = graph.smoothed_pose().expect("a solution taken over");
+        assert_eq!(steps as usize, ticks.len());
+        let last = out.poses()[ticks.len() - 1];
+        assert_eq!((last.x, last.y), (newest.x as f32, newest.y as f32));
     }
 }

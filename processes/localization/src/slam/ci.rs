@@ -52,32 +52,38 @@ pub fn covariance_intersection<const N: usize>(
     }
     let ia = Cholesky::new(*pa)?.inverse();
     let ib = Cholesky::new(*pb)?.inverse();
-    let trace_at =
-        |omega: f64| fuse_at(omega, a, &ia, b, &ib).map_or(f64::INFINITY, |f| f.1.trace());
+    let omega = argmin_on_unit_interval(|omega: f64| {
+        fuse_at(omega, a, &ia, b, &ib).map_or(f64::INFINITY, |f| f.1.trace())
+    });
+    let (mean, cov) = fuse_at(omega, a, &ia, b, &ib)?;
+    Some(Fused { mean, cov, omega })
+}
+
+/// The ω ∈ [0, 1] that minimises `f`, a convex function (∞ where undefined): golden-section
+/// search inside, compared with both ends (the optimum is often an end: one estimate alone).
+pub(crate) fn argmin_on_unit_interval(f: impl Fn(f64) -> f64) -> f64 {
     let inv_phi = (5f64.sqrt() - 1.0) / 2.0;
     let (mut lo, mut hi) = (0.0, 1.0);
     let (mut x1, mut x2) = (hi - inv_phi * (hi - lo), lo + inv_phi * (hi - lo));
-    let (mut f1, mut f2) = (trace_at(x1), trace_at(x2));
+    let (mut f1, mut f2) = (f(x1), f(x2));
     for _ in 0..GOLDEN_ITERATIONS {
         if f1 <= f2 {
             hi = x2;
             (x2, f2) = (x1, f1);
             x1 = hi - inv_phi * (hi - lo);
-            f1 = trace_at(x1);
+            f1 = f(x1);
         } else {
             lo = x1;
             (x1, f1) = (x2, f2);
             x2 = lo + inv_phi * (hi - lo);
-            f2 = trace_at(x2);
+            f2 = f(x2);
         }
     }
     let inner = 0.5 * (lo + hi);
-    let omega = [0.0, inner, 1.0]
+    [0.0, inner, 1.0]
         .into_iter()
-        .min_by(|&p, &q| trace_at(p).total_cmp(&trace_at(q)))
-        .unwrap_or(inner);
-    let (mean, cov) = fuse_at(omega, a, &ia, b, &ib)?;
-    Some(Fused { mean, cov, omega })
+        .min_by(|&p, &q| f(p).total_cmp(&f(q)))
+        .unwrap_or(inner)
 }
 
 #[cfg(test)]

@@ -3,11 +3,12 @@
 
 use super::{
     Association, AssociationStats, Correspondence, Gates, Landmark, SlamConfig, SlamError,
-    SlotTable, Tally, checked_reading, covariance_intersection, inverse_range_bearing, observe,
+    SlotTable, Tally, checked_reading, inverse_range_bearing, observe,
 };
 use crate::kalman::symmetrize;
 use crate::models::{odometry_is_plausible, unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v};
 use crate::noise::NoiseModel;
+use crate::slam::ci::argmin_on_unit_interval;
 use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, Pose2, wrap_angle};
 use nalgebra::{
     Cholesky, DMatrix, DVector, Matrix2, Matrix2x3, Matrix3, SMatrix, Vector2, Vector3,
@@ -65,8 +66,11 @@ pub enum LandmarkInit {
 /// What [`EkfSlam::fuse_landmarks`] did with another robot's list.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FuseReport {
-    /// Landmarks both maps had, fused by covariance intersection.
+    /// Landmarks both maps had, fused by covariance intersection (ω < 1).
     pub fused: usize,
+    /// Landmarks both maps had whose CI optimum was this map's own estimate (ω = 1): the other
+    /// one brought less than fusing would have cost the rest of the state; left as they were.
+    pub kept: usize,
     /// Landmarks only the other map had, added.
     pub added: usize,
     /// Entries not finite, not positive definite, or beyond the capacity.
@@ -549,12 +553,15 @@ impl<M: MotionModel> EkfSlam<M> {
     }
 
     /// Fuses another robot's landmarks (same map frame) into this map by id: a shared landmark
-    /// is fused by covariance intersection (Julier & Uhlmann 1997) with ω minimising the trace of
-    /// the fused covariance; the rest of the state follows through the cross-covariances. CI
-    /// enters as a Kalman update on the whole state inflated by 1/ω with the other estimate as
-    /// a measurement of covariance P_b/(1 − ω) (Julier & Uhlmann 1997, §4), which makes the
-    /// landmark block exactly the CI result and keeps the joint Σ conservative whatever the
-    /// unknown correlation. A landmark only the other map has is added with its covariance and
+    /// is fused by covariance intersection (Julier & Uhlmann 1997), one landmark at a time; the
+    /// rest of the state follows through the cross-covariances. CI enters as a Kalman update on
+    /// the whole state inflated by 1/ω with the other estimate as a measurement of covariance
+    /// P_b/(1 − ω) (Julier & Uhlmann 1997, §4): the landmark block is the CI of the two
+    /// estimates, and the joint Σ stays conservative whatever the unknown correlation. ω
+    /// minimises the trace of the whole state's fused covariance (not only the landmark's), so
+    /// a fusion never grows tr Σ: with ω chosen for the landmark alone, each landmark's 1/ω
+    /// inflated every other one, and a map of many shared landmarks ran away to Σ ~ 1e13 and
+    /// negative variances. A landmark only the other map has is added with its covariance and
     /// no correlation to this state.
     pub fn fuse_landmarks(&mut self, other: &[Landmark]) -> FuseReport {
         let mut report = FuseReport::default();
@@ -564,13 +571,11 @@ impl<M: MotionModel> EkfSlam<M> {
             let slot = (0..self.n).find(|&s| self.ids[s] == lm.id);
             match (usable, slot) {
                 (false, _) => report.refused += 1,
-                (true, Some(slot)) => {
-                    if self.fuse_one(slot, lm) {
-                        report.fused += 1;
-                    } else {
-                        report.refused += 1;
-                    }
-                }
+                (true, Some(slot)) => match self.fuse_one(slot, lm) {
+                    Some(true) => report.fused += 1,
+                    Some(false) => report.kept += 1,
+                    None => report.refused += 1,
+                },
                 (true, None) => match self.insert_landmark(lm) {
                     Ok(_) => report.added += 1,
                     Err(_) => report.refused += 1,
@@ -621,25 +626,19 @@ impl<M: MotionModel> EkfSlam<M> {
         result
     }
 
-    /// CI of landmark `slot` with `other` (see [`EkfSlam::fuse_landmarks`]); false if refused.
-    fn fuse_one(&mut self, slot: usize, other: &Landmark) -> bool {
-        let own = match self.landmark(slot) {
-            Some(l) => l,
-            None => return false,
-        };
-        let Some(fused) = covariance_intersection(&own.mean, &own.cov, &other.mean, &other.cov)
-        else {
-            return false;
-        };
-        // ω → 1: our estimate alone is the CI optimum; ω is kept ≥ 1e-3 so 1/ω stays tame.
-        if fused.omega >= 1.0 - 1e-9 {
-            return true;
+    /// CI of landmark `slot` with `other` (see [`EkfSlam::fuse_landmarks`]): whether it
+    /// changed the state (false: ω = 1, kept as it was); `None` if refused.
+    fn fuse_one(&mut self, slot: usize, other: &Landmark) -> Option<bool> {
+        let o = offset(slot);
+        let omega = self.ci_weight(o, &other.cov)?;
+        // ω = 1: our estimate alone is the CI optimum. ω is kept ≥ 1e-3 so 1/ω stays tame.
+        if omega >= 1.0 - 1e-9 {
+            return Some(false);
         }
-        let omega = fused.omega.max(1e-3);
+        let omega = omega.max(1e-3);
         let d = offset(self.n);
         self.sigma.view_mut((0, 0), (d, d)).scale_mut(1.0 / omega);
-        let o = offset(slot);
-        let nu = other.mean - own.mean;
+        let nu = other.mean - Vector2::new(self.mu[o], self.mu[o + 1]);
         let q = other.cov / (1.0 - omega);
         self.update(
             &nu,
@@ -649,7 +648,42 @@ impl<M: MotionModel> EkfSlam<M> {
             &q,
             f64::INFINITY,
         )
-        .is_ok()
+        .ok()
+        .map(|()| true)
+    }
+
+    /// The CI weight ω ∈ [0, 1] of this state when the landmark at offset `o` is fused with an
+    /// estimate of covariance `p_b`: the one that minimises the trace of the WHOLE state's
+    /// fused covariance Σ_f(ω) = Σ/ω − (Σ/ω) Hᵀ S⁻¹ H (Σ/ω), S = H Σ Hᵀ/ω + P_b/(1 − ω), whose
+    /// trace is tr Σ/ω − tr(S⁻¹ M)/ω² with M = Σ_{·o}ᵀ Σ_{·o} (2×2, computed once). Every ω
+    /// inflates the rest of the state by 1/ω, so a fusion is taken only as far as the
+    /// landmark's gain outweighs that: the trace never grows (ω = 1 leaves Σ as it is), and
+    /// fusing landmark after landmark cannot run away. `None` when the trace is not finite.
+    fn ci_weight(&self, o: usize, p_b: &Matrix2<f64>) -> Option<f64> {
+        let d = offset(self.n);
+        let trace: f64 = (0..d).map(|i| self.sigma[(i, i)]).sum();
+        let a = self.sigma.fixed_view::<2, 2>(o, o).into_owned();
+        let mut m = Matrix2::zeros();
+        for r in 0..d {
+            let p = Vector2::new(self.sigma[(r, o)], self.sigma[(r, o + 1)]);
+            m += p * p.transpose();
+        }
+        if !(trace.is_finite() && m.iter().all(|v| v.is_finite())) {
+            return None;
+        }
+        let fused_trace = |omega: f64| {
+            if omega >= 1.0 {
+                return trace;
+            }
+            if omega <= 0.0 {
+                return f64::INFINITY;
+            }
+            let s = a / omega + p_b / (1.0 - omega);
+            Cholesky::new(s).map_or(f64::INFINITY, |chol| {
+                trace / omega - chol.solve(&m).trace() / (omega * omega)
+            })
+        };
+        Some(argmin_on_unit_interval(fused_trace))
     }
 }
 

@@ -9,8 +9,8 @@
 //! weight factor).
 
 use super::{
-    Association, AssociationStats, EkfSlam, FastSlam, FastSlamConfig, Landmark, SlamConfig,
-    SlamError,
+    Association, AssociationStats, EkfSlam, FastSlam, FastSlamConfig, FuseReport, Landmark,
+    SlamConfig, SlamError,
 };
 use crate::noise::NoiseModel;
 use crate::{Estimator, Readings};
@@ -96,6 +96,8 @@ pub struct EkfSlamEstimator {
     noise: NoiseModel,
     decisions: Vec<Result<Association, SlamError>>,
     ignored: u64,
+    /// A peer's landmarks being fused, as the filter takes them (room for a whole map).
+    peer_landmarks: Vec<Landmark>,
 }
 
 impl EkfSlamEstimator {
@@ -129,6 +131,7 @@ impl EkfSlamEstimator {
             noise,
             decisions: Vec::with_capacity(MAX_BEACONS),
             ignored: 0,
+            peer_landmarks: Vec::with_capacity(MAX_LANDMARKS),
         }
     }
 
@@ -195,6 +198,12 @@ impl Estimator for EkfSlamEstimator {
 
     fn write_landmarks(&self, out: &mut Landmarks) -> bool {
         write_landmarks(EstimatorKind::EkfSlam, self.slam.landmarks(), out)
+    }
+
+    fn fuse_landmarks(&mut self, other: &Landmarks) -> Option<FuseReport> {
+        self.peer_landmarks.clear();
+        self.peer_landmarks.extend(landmarks_of(other));
+        Some(self.slam.fuse_landmarks(&self.peer_landmarks))
     }
 }
 

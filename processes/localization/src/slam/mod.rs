@@ -1,6 +1,7 @@
 //! Simultaneous localisation and mapping on range-bearing beacons: EKF-SLAM ([`EkfSlam`],
 //! Thrun et al. 2005 §10.2), FastSLAM 1.0 ([`FastSlam`], §13.3), and covariance intersection
-//! ([`covariance_intersection`], Julier & Uhlmann 1997) to merge another robot's landmarks.
+//! ([`covariance_intersection`], Julier & Uhlmann 1997) to merge another robot's landmarks
+//! ([`PeerFusion`]: two robots exchanging their maps in the stack).
 //!
 //! Both filters take odometry (v, ω over dt) and `BeaconReading`s (range, bearing relative to
 //! the heading). With [`Correspondence::Known`] the reading's id names the landmark; with
@@ -25,11 +26,16 @@ mod ci;
 mod ekf_slam;
 mod estimators;
 mod fastslam;
+mod peer;
 
 pub use ci::{Fused, covariance_intersection};
 pub use ekf_slam::{EkfSlam, FuseReport, LandmarkInit, MotionModel, UnicycleMotion};
 pub use estimators::{EkfSlamEstimator, FastSlamEstimator, SLAM_CAPACITY, write_landmarks};
 pub use fastslam::{FastSlam, FastSlamConfig};
+pub use peer::{
+    DEFAULT_FUSE_EVERY, FUSING_ESTIMATOR, FusionTotals, PEER_LANDMARKS, PeerArgs, PeerFusion,
+    PeerRefused, check_peer,
+};
 
 use crate::kalman::KalmanError;
 use nalgebra::{Matrix2, Matrix2x3, Vector2, Vector3};

@@ -1,0 +1,205 @@
+//! What a restarted process resumes from. A process that crashed cannot hand its last output to
+//! its successor the way a swapped one does (its publisher died with it), so the launcher keeps
+//! the newest sample of every topic a role resumes from ([`Keeper`], zero-copy: it holds the
+//! loaned sample, it copies nothing per step) and, when the role dies, writes those samples into
+//! a directory the restarted process is pointed at (`MOLE_RESUME`). The files are the messages'
+//! own fixed-layout bytes, one per topic.
+
+use crate::context::Context;
+use crate::error::RuntimeError;
+use crate::ports::Subscriber;
+use crate::waitset::{WaitSet, Wake};
+use crate::{ClockMode, Waker};
+use mole_types::topics::{self, TopicVisitor};
+use mole_types::{Message, Topic};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, Sender};
+use std::time::{Duration, Instant};
+
+/// How often a realtime keeper drains its queues (it is never woken per message there:
+/// realtime publishers overwrite a full queue's oldest sample, so nothing waits for it).
+const REALTIME_DRAIN: Duration = Duration::from_millis(20);
+/// The longest a keeper sleeps before it looks for a request.
+const REQUEST_POLL: Duration = Duration::from_millis(10);
+
+/// The file in a resume directory that holds the last sample of `topic`.
+pub fn resume_file(dir: &Path, topic: &str) -> PathBuf {
+    dir.join(format!("{}.bin", topic.replace('/', ".")))
+}
+
+/// Reads the sample of `topic` a restarted process resumes from: `None` when the directory has
+/// none (nothing was published before the crash); an error naming the file and what was wrong
+/// when it is not one valid message of this type.
+pub fn read_resume_file<M: Message>(
+    dir: &Path,
+    topic: Topic<M>,
+) -> Result<Option<Box<M>>, RuntimeError> {
+    let path = resume_file(dir, topic.name);
+    let bytes = match std::fs::read(&path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(RuntimeError::Resume(path, e.to_string())),
+    };
+    let size = std::mem::size_of::<M>();
+    if bytes.len() != size {
+        return Err(RuntimeError::Resume(
+            path,
+            format!(
+                "{} bytes, expected one {} of {size} bytes",
+                bytes.len(),
+                M::wire_type_name()
+            ),
+        ));
+    }
+    let mut message: Box<M> = bytemuck::zeroed_box();
+    bytemuck::bytes_of_mut(message.as_mut()).copy_from_slice(&bytes);
+    message
+        .validate()
+        .map_err(|e| RuntimeError::Resume(path, format!("not a valid message: {e:?}")))?;
+    Ok(Some(message))
+}
+
+/// Writes `message` as the sample of `topic` in `dir`, atomically (a reader never sees half).
+fn write_resume_file<M: Message>(dir: &Path, topic: &str, message: &M) -> std::io::Result<()> {
+    let path = resume_file(dir, topic);
+    let partial = path.with_extension("partial");
+    std::fs::write(&partial, bytemuck::bytes_of(message))?;
+    std::fs::rename(&partial, &path)
+}
+
+/// A request to a [`Keeper`]: write the kept samples of `topics` into `dir`; the reply is how
+/// many were written (topics nothing was published on yet are left out).
+pub struct SaveRequest {
+    pub topics: Vec<&'static str>,
+    pub dir: PathBuf,
+    pub reply: Sender<Result<usize, String>>,
+}
+
+/// One kept topic, whatever its message type.
+trait Kept {
+    fn topic(&self) -> &'static str;
+    fn drain(&mut self);
+    fn waker(&self) -> Waker;
+    /// Writes the newest sample into `dir`; false when there is none yet.
+    fn save(&mut self, dir: &Path) -> std::io::Result<bool>;
+}
+
+impl<M: Message> Kept for Subscriber<M> {
+    fn topic(&self) -> &'static str {
+        Subscriber::topic(self)
+    }
+    fn drain(&mut self) {
+        Subscriber::drain(self, |_| {});
+    }
+    fn waker(&self) -> Waker {
+        Subscriber::waker(self)
+    }
+    fn save(&mut self, dir: &Path) -> std::io::Result<bool> {
+        // The last samples the dead process sent may still be queued.
+        Subscriber::drain(self, |_| {});
+        match self.latest() {
+            Some(message) => write_resume_file(dir, self.topic, message).map(|()| true),
+            None => Ok(false),
+        }
+    }
+}
+
+/// Keeps the newest sample of chosen topics of a namespace for restarted processes. It runs on
+/// a thread of its own ([`Keeper::serve`]); in lockstep it drains on every publish (a full queue
+/// would hold its publisher back), in realtime every [`REALTIME_DRAIN`].
+pub struct Keeper {
+    ctx: Context,
+    kept: Vec<Box<dyn Kept>>,
+}
+
+impl Keeper {
+    /// A keeper of `names` (topics of `mole_types::topics`) on its own node; it publishes no
+    /// statistics (it is part of the launcher, not a role).
+    pub fn new(mut ctx: Context, names: &[&str]) -> Result<Keeper, RuntimeError> {
+        ctx.silence_stats();
+        struct Open<'a> {
+            ctx: &'a Context,
+            names: &'a [&'a str],
+            kept: Vec<Box<dyn Kept>>,
+            error: Option<RuntimeError>,
+        }
+        impl TopicVisitor for Open<'_> {
+            fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
+                if self.error.is_some() || !self.names.contains(&topic.name) {
+                    return;
+                }
+                let wakes = self.ctx.mode() == ClockMode::Lockstep;
+                let subscriber = match wakes {
+                    true => self.ctx.subscriber(topic),
+                    false => self.ctx.passive_subscriber(topic),
+                };
+                match subscriber {
+                    Ok(s) => self.kept.push(Box::new(s)),
+                    Err(e) => self.error = Some(e),
+                }
+            }
+        }
+        let mut open = Open {
+            ctx: &ctx,
+            names,
+            kept: Vec::new(),
+            error: None,
+        };
+        topics::for_each(&mut open);
+        if let Some(e) = open.error {
+            return Err(e);
+        }
+        if let Some(unknown) = names
+            .iter()
+            .find(|n| !open.kept.iter().any(|k| k.topic() == **n))
+        {
+            return Err(RuntimeError::Setting(format!(
+                "cannot keep `{unknown}`: not a topic of the stack"
+            )));
+        }
+        let kept = open.kept;
+        Ok(Keeper { ctx, kept })
+    }
+
+    /// Keeps the newest samples and answers `requests` until the shutdown flag is set or the
+    /// requests' sender is gone.
+    pub fn serve(mut self, requests: Receiver<SaveRequest>) -> Result<(), RuntimeError> {
+        let waitset = WaitSet::new();
+        let lockstep = self.ctx.mode() == ClockMode::Lockstep;
+        let wakers: Vec<Waker> = match lockstep {
+            true => self.kept.iter().map(|k| k.waker()).collect(),
+            false => Vec::new(),
+        };
+        let _attached = waitset.attach_all(&wakers)?;
+        let mut next_drain = Instant::now();
+        loop {
+            let wake = waitset.wait(&mut self.ctx, Some(Instant::now() + REQUEST_POLL))?;
+            if wake == Wake::Shutdown {
+                return Ok(());
+            }
+            if lockstep || Instant::now() >= next_drain {
+                self.kept.iter_mut().for_each(|k| k.drain());
+                next_drain = Instant::now() + REALTIME_DRAIN;
+            }
+            loop {
+                match requests.try_recv() {
+                    Ok(request) => {
+                        let _ = request.reply.send(self.save(&request.topics, &request.dir));
+                    }
+                    Err(std::sync::mpsc::TryRecvError::Empty) => break,
+                    Err(std::sync::mpsc::TryRecvError::Disconnected) => return Ok(()),
+                }
+            }
+        }
+    }
+
+    fn save(&mut self, topics: &[&'static str], dir: &Path) -> Result<usize, String> {
+        let failed = |e: std::io::Error| format!("{}: {e}", dir.display());
+        std::fs::create_dir_all(dir).map_err(failed)?;
+        let mut written = 0;
+        for kept in self.kept.iter_mut().filter(|k| topics.contains(&k.topic())) {
+            written += usize::from(kept.save(dir).map_err(failed)?);
+        }
+        Ok(written)
+    }
+}
