@@ -6,6 +6,7 @@
 //! Everything is judged against the ground truth of `world/map` rasterised at the mapping grid's
 //! resolution. Per-message methods never allocate: every buffer is sized in [`Monitor::new`].
 
+mod ending;
 mod render;
 mod slam;
 mod smoothed;
@@ -13,6 +14,7 @@ mod summary;
 mod track;
 mod truth;
 
+pub use ending::{Ending, LOCKSTEP_DRAIN, RunEnding};
 pub use slam::{CHI2_2_95, SlamSummary};
 pub use summary::{
     LatencyUs, RunMeta, Summary, SwapRecord, TopicSummary, UpdateUs, fnv1a64, read_summary,
@@ -764,6 +766,19 @@ impl Monitor {
     /// (purple), true trajectory (green), estimated trajectory (orange), smoothed trajectory
     /// (azure), true beacons and landmark ellipses, start (cyan) and goal
     /// (magenta) markers, and a legend in a built-in bitmap font. At least 800 px wide, y up.
+    /// summary.json and map.png in `out`, at the end of the run.
+    pub fn write_files(&self, meta: &RunMeta, out: &Path) -> Result<(), MonitorError> {
+        let io = |source| MonitorError::Io {
+            path: out.to_path_buf(),
+            source,
+        };
+        std::fs::create_dir_all(out).map_err(io)?;
+        write_summary(&self.summary(meta), &out.join("summary.json"))?;
+        self.render_png(&out.join("map.png"))?;
+        tracing::info!(out = %out.display(), exit_reason = meta.exit_reason, "summary written");
+        Ok(())
+    }
+
     pub fn render_png(&self, path: &Path) -> Result<(), MonitorError> {
         let canvas = render::draw(self);
         let io = |source| MonitorError::Io {

@@ -4,16 +4,14 @@
 //! Every topic in → monitor/status (a few times a second) and, at the end, the two files.
 
 use clap::Parser;
-use mole_monitor::{Monitor, RunMeta, write_summary};
-use mole_runtime::{ClockMode, CommonArgs, Flow, Process, now_ns};
-use mole_types::{EndReason, EstimatorKind, Message, PlannerKind, env, topics};
-use std::path::{Path, PathBuf};
+use mole_monitor::{Ending, Monitor, RunEnding, RunMeta};
+use mole_runtime::{CommonArgs, Flow, Process, now_ns};
+use mole_types::{EstimatorKind, Message, PlannerKind, env, topics};
+use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const STATUS_PERIOD: Duration = Duration::from_millis(200);
-/// Lockstep: how long to wait for the last step's messages after the world's final step.
-const LOCKSTEP_DRAIN: Duration = Duration::from_secs(2);
 
 #[derive(Debug, Parser)]
 #[command(
@@ -50,7 +48,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let stats = p.observed(topics::STACK_STATS, false)?;
     let mut status_out = p.output(topics::MONITOR_STATUS)?;
     let mode = p.context().mode();
-    let (mut end, mut end_seen, mut started) = (None::<u32>, None::<Instant>, None::<Instant>);
+    let mut ending = RunEnding::new(mode);
 
     p.observe(
         STATUS_PERIOD,
@@ -59,9 +57,8 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             // Truth first: every estimate, grid and status of a step derives from a truth in.
             seen.drain(truth, |t| {
                 m.on_truth(t);
-                end = end.or(t.is_end().then_some(t.end_reason));
+                ending.on_truth(t);
             });
-            started.get_or_insert_with(Instant::now);
             seen.drain(pose, |x| m.on_pose(x));
             seen.drain(grid, |x| m.on_grid(x));
             seen.drain(contact, |x| m.on_contact(x));
@@ -70,36 +67,26 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             seen.drain(trajectory, |x| m.on_trajectory(x));
             seen.drain(plan, |x| m.on_plan_status(x));
             seen.drain(stats, |x| m.on_stats(x));
-            // Lockstep: the last step's estimate and grids were sent before the world's final
-            // step, but a publisher blocked on our full queue may still be delivering them:
-            // wait briefly, so the summary is the same on every run.
             let last = tick(seen.latest(truth)).unwrap_or(0);
             let outputs = [
                 tick(seen.latest(pose)),
                 tick(seen.latest(grid)),
                 tick(seen.latest(contact)),
             ];
-            let behind = outputs.iter().any(|t| t.is_some_and(|t| t + 1 < last));
-            let draining = end.is_some() && mode == ClockMode::Lockstep && !seen.shutdown();
-            if draining
-                && behind
-                && end_seen.get_or_insert_with(Instant::now).elapsed() < LOCKSTEP_DRAIN
-            {
-                seen.again_in(Duration::from_millis(5));
-                return Ok(Flow::Continue);
-            }
-            let finished = end.is_some() || seen.shutdown();
-            if finished {
-                let reason = end
-                    .and_then(EndReason::from_code)
-                    .map_or("interrupted", EndReason::name);
-                let wall = started.map_or(Duration::ZERO, |s| s.elapsed());
-                write_files(
-                    m,
-                    &RunMeta::new(args.planner, args.estimator, mode, *seed, wall, reason),
-                    &args.out,
-                )?;
-            }
+            let finished = match ending.decide(last, &outputs, seen.shutdown()) {
+                Ending::Running => false,
+                Ending::Draining => {
+                    seen.again_in(Duration::from_millis(5));
+                    return Ok(Flow::Continue);
+                }
+                Ending::Finished(reason) => {
+                    let wall = ending.wall_time();
+                    let meta =
+                        RunMeta::new(args.planner, args.estimator, mode, *seed, wall, reason);
+                    m.write_files(&meta, &args.out)?;
+                    true
+                }
+            };
             if finished || seen.periodic() {
                 status_out.publish(last, now_ns(), |s| {
                     m.write_status(s);
@@ -114,13 +101,4 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
 /// The tick of a message, if there is one.
 fn tick<M: Message>(message: Option<&M>) -> Option<u64> {
     message.map(|m| m.header().tick)
-}
-
-/// summary.json and map.png, at the end of the run.
-fn write_files(m: &Monitor, meta: &RunMeta, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
-    std::fs::create_dir_all(out)?;
-    write_summary(&m.summary(meta), &out.join("summary.json"))?;
-    m.render_png(&out.join("map.png"))?;
-    tracing::info!(out = %out.display(), exit_reason = meta.exit_reason, "summary written");
-    Ok(())
 }
