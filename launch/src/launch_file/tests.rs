@@ -358,7 +358,12 @@ fn shipped_stacks_are_the_graph() {
         for p in &lf.processes {
             let spec = mole_types::graph::spec(&p.role).expect("a graph role");
             assert_eq!(p.command, spec.program, "{name}");
-            assert_eq!(p.restart.policy, RestartWhen::OnFailure, "{name}: {}", p.role);
+            assert_eq!(
+                p.restart.policy,
+                RestartWhen::OnFailure,
+                "{name}: {}",
+                p.role
+            );
             assert_eq!(p.restart.max, 5);
         }
         let order = crate::start_order(&lf.processes).unwrap();
