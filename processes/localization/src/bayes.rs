@@ -10,7 +10,7 @@
 //! cells (bins) when they exceed half a cell (bin). The motion noise is a separable 3-tap blur per
 //! step whose variance equals the step's (exact for any small variance, unlike a sampled
 //! Gaussian kernel). The likelihood is evaluated at cell centres with the measurement σ inflated
-//! by the in-cell spread (deviation from the seed's exact p(z | x): a cell is not a point).
+//! by the in-cell spread (deviation from the source's exact p(z | x): a cell is not a point).
 
 use crate::models::{BeaconTable, odometry_is_plausible, sinc, wrap_near};
 use crate::noise::NoiseModel;

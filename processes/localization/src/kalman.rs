@@ -47,7 +47,7 @@ pub fn symmetrize<const N: usize>(m: &mut SMatrix<f64, N, N>) {
 /// S = H Σ Hᵀ + Q, K = Σ Hᵀ S⁻¹, μ ← μ + K ν, and the covariance in Joseph form
 /// Σ ← (I − K H) Σ (I − K H)ᵀ + K Q Kᵀ, symmetrised.
 ///
-/// Deviation from the seed's Σ ← (I − K H) Σ: the Joseph form is algebraically equal for the
+/// Deviation from the source's Σ ← (I − K H) Σ: the Joseph form is algebraically equal for the
 /// optimal K but stays symmetric positive definite under rounding (Bucy & Joseph, 1968).
 /// With `gate = Some(g)` a reading whose νᵀ S⁻¹ ν exceeds g is refused. Returns νᵀ S⁻¹ ν.
 /// The caller wraps angle components of ν (and of μ afterwards); this function knows no angles.
@@ -118,13 +118,13 @@ mod tests {
     }
 
     #[test]
-    fn joseph_form_equals_the_seed_form_for_the_optimal_gain() {
+    fn joseph_form_equals_the_source_form_for_the_optimal_gain() {
         let mut mu = Vector3::new(1.0, 2.0, 0.1);
         let mut sigma = Matrix3::new(0.5, 0.1, 0.02, 0.1, 0.4, -0.03, 0.02, -0.03, 0.2);
         let h_t = Matrix2x3::new(0.6, -0.8, 0.0, 0.16, 0.12, -1.0);
         let q_t = Matrix2::new(0.01, 0.0, 0.0, 0.004);
         let nu = Vector2::new(0.3, -0.05);
-        // The seed's form, computed directly.
+        // The source's form, computed directly.
         let s = h_t * sigma * h_t.transpose() + q_t;
         let k = sigma * h_t.transpose() * s.try_inverse().unwrap();
         let mu_seed = mu + k * nu;

@@ -1,7 +1,7 @@
 //! The linear Kalman filter (algorithms §6.5): a generic [`KalmanFilter`] over N states, M measurement
 //! components and U controls, and the [`Kf`] estimator that runs it on the robot.
 //!
-//! Noise naming follows the seed and Thrun: R is the PROCESS noise covariance, Q the
+//! Noise naming follows algorithms.md and Thrun: R is the PROCESS noise covariance, Q the
 //! MEASUREMENT noise covariance. filterpy (and many other libraries) use the opposite letters:
 //! filterpy's `Q` is our R and filterpy's `R` is our Q.
 //!

@@ -9,7 +9,7 @@
 //! ([`NoiseModel`]), the generic Kalman correction ([`kalman`]) and the beacon lookup
 //! ([`BeaconTable`]; the localisers only: a SLAM estimator never reads the beacon positions).
 //!
-//! Naming follows the seed (after Thrun, *Probabilistic Robotics*): R_t is the PROCESS noise
+//! Naming follows algorithms.md (after Thrun, *Probabilistic Robotics*): R_t is the PROCESS noise
 //! covariance, Q_t the MEASUREMENT noise covariance.
 
 pub mod bayes;

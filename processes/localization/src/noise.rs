@@ -1,6 +1,6 @@
 //! Motion and measurement noise, from the map's `SensorSpec`.
 //!
-//! Names follow the seed (§6.5, after Thrun): R_t is the PROCESS (motion) noise covariance and
+//! Names follow algorithms.md (§6.5, after Thrun): R_t is the PROCESS (motion) noise covariance and
 //! Q_t the MEASUREMENT noise covariance; M_t is the noise of the control u = (v, ω) that R_t is
 //! built from.
 

@@ -2,7 +2,7 @@
 //! π = the unicycle motion model with sampled odometry noise, importance weights from the beacon
 //! and fix likelihoods, low-variance resampling when the effective sample size drops.
 //!
-//! Errata handled here (docs/errata.md): the seed's "draw i with probability ∝ w^[i]" is done on
+//! Errata handled here (docs/errata.md): the source's "draw i with probability ∝ w^[i]" is done on
 //! weights normalised first (in log space, log-sum-exp, so 10⁴ tight likelihoods never underflow)
 //! and with Thrun's low-variance sampler (*Probabilistic Robotics*, Table 4.4) rather than J
 //! independent draws, which lose diversity faster; bearing innovations and particle headings are

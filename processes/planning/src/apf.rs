@@ -1,6 +1,6 @@
-//! Artificial potential field (algorithms §1), in the seed's form and corrected (docs/errata.md).
+//! Artificial potential field (algorithms §1), in the source's form and corrected (docs/errata.md).
 //!
-//! Seed form ([`ApfForm::Seed`]): φ_goal = c·|p − p_goal| (§1.2), the boundary potential
+//! Source form ([`ApfForm::Source`]): φ_goal = c·|p − p_goal| (§1.2), the boundary potential
 //! φ_b = 1/(δ + Σ(g_i + |g_i|)) (§1.3), the square-obstacle potential φ_k = φ_max/(1 + h) with
 //! the '+1' of h as written, φ_obs = max_k φ_k, F_net = F_goal − (∇φ_b + ∇φ_obs) (§1.4) and the
 //! heading θ = atan(F_y/F_x).
@@ -26,7 +26,7 @@ use mole_types::{
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ApfForm {
     /// Algorithms §1 as written (atan, '+1' in h, 1/(δ+Σ(g+|g|)) boundary).
-    Seed,
+    Source,
     /// docs/errata.md: atan2, guarded attraction, FIRAS barriers per wall and obstacle.
     #[default]
     Corrected,
@@ -56,7 +56,7 @@ pub fn f_goal(p: [f64; 2], goal: [f64; 2], c: f64, eps: f64) -> [f64; 2] {
 }
 
 /// Algorithms §1.3: the boundary lines g_i of the arena `[x0, x1] × [y0, y1]`, each ≤ 0 inside
-/// (the seed leaves the sign open; this one makes g + |g| vanish inside).
+/// (the source leaves the sign open; this one makes g + |g| vanish inside).
 pub fn boundary_g(p: [f64; 2], arena: [f64; 4]) -> [f64; 4] {
     [
         arena[0] - p[0],
@@ -143,9 +143,9 @@ pub struct ApfConfig {
     pub eta: f64,
     /// Influence distance ρ0 (m) of the barriers.
     pub rho0: f64,
-    /// φ_max of the seed's obstacle potential.
+    /// φ_max of the source's obstacle potential.
     pub phi_max: f64,
-    /// δ of the seed's boundary potential.
+    /// δ of the source's boundary potential.
     pub delta: f64,
     /// The goal counts as reached within this distance (m).
     pub goal_tolerance: f64,
@@ -286,7 +286,7 @@ impl Apf {
         let cfg = &self.config;
         let r = self.limits.radius;
         match cfg.form {
-            ApfForm::Seed => {
+            ApfForm::Source => {
                 let fg = f_goal_seed(p, self.goal, cfg.c);
                 let mut grad = [0.0, 0.0];
                 if let Some(arena) = self.field.extent() {
@@ -341,7 +341,7 @@ impl Apf {
     /// The heading of F_net in the configured form (algorithms §1.4).
     pub fn heading_of(&self, f: [f64; 2]) -> f64 {
         match self.config.form {
-            ApfForm::Seed => heading_seed(f),
+            ApfForm::Source => heading_seed(f),
             ApfForm::Corrected => heading(f),
         }
     }
@@ -511,7 +511,7 @@ mod tests {
     use core::f64::consts::PI;
 
     #[test]
-    fn seed_heading_loses_the_quadrant_atan2_does_not() {
+    fn source_heading_loses_the_quadrant_atan2_does_not() {
         // Goal behind and to the left: F points into the third quadrant.
         let f = f_goal([1.0, 1.0], [0.0, 0.0], 1.0, 1e-9);
         assert!((heading(f) + 3.0 * PI / 4.0).abs() < 1e-12);
@@ -531,9 +531,9 @@ mod tests {
     }
 
     #[test]
-    fn seed_boundary_gradient_is_zero_inside_firas_pushes_off_the_wall() {
+    fn source_boundary_gradient_is_zero_inside_firas_pushes_off_the_wall() {
         let arena = [0.0, 0.0, 10.0, 10.0];
-        // 5 cm from the left wall: the seed's potential is flat there.
+        // 5 cm from the left wall: the source's potential is flat there.
         let p = [0.25, 5.0];
         let g = numerical_gradient(|q| phi_b_seed(q, arena, 1e-3), p, 1e-4);
         assert_eq!(g, [0.0, 0.0]);
@@ -545,7 +545,7 @@ mod tests {
     }
 
     #[test]
-    fn seed_h_is_zero_inside_the_square_and_its_plus_one_shrinks_it() {
+    fn source_h_is_zero_inside_the_square_and_its_plus_one_shrinks_it() {
         let k = Square::new(5.0, 5.0, 2.0); // [4, 6]²
         assert_eq!(h_seed([5.0, 5.0], &k), 0.0);
         assert_eq!(h_seed([4.5, 4.2], &k), 0.0);
@@ -584,7 +584,7 @@ mod tests {
             (far[0] - 1.0).abs() < 1e-9,
             "only the attraction far away: {far:?}"
         );
-        // The seed form flattens inside the square; the corrected one's distance stays 0 and
+        // The source form flattens inside the square; the corrected one's distance stays 0 and
         // finite, never NaN.
         let inside = apf.force([5.05, 5.05], None);
         assert!(inside[0].is_finite() && inside[1].is_finite());

@@ -22,14 +22,14 @@ pub fn bounce_back_velocity(v: [f64; 2], alpha: f64) -> [f64; 2] {
 /// Which position update [`bounce_back_position`] uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PositionUpdate {
-    /// The seed's (x, y)(t+1) = −α·(v_x, v_y)(t)·Δt, which drops x(t) (docs/errata.md).
-    Seed,
+    /// The source's (x, y)(t+1) = −α·(v_x, v_y)(t)·Δt, which drops x(t) (docs/errata.md).
+    Source,
     /// (x, y)(t+1) = (x, y)(t) − α·(v_x, v_y)(t)·Δt.
     #[default]
     Corrected,
 }
 
-/// Algorithms §4.1's position update after a bounce-back, in the seed's form or the corrected one.
+/// Algorithms §4.1's position update after a bounce-back, in the source's form or the corrected one.
 pub fn bounce_back_position(
     x: [f64; 2],
     v: [f64; 2],
@@ -39,7 +39,7 @@ pub fn bounce_back_position(
 ) -> [f64; 2] {
     let [vx, vy] = bounce_back_velocity(v, alpha);
     match form {
-        PositionUpdate::Seed => [vx * dt, vy * dt],
+        PositionUpdate::Source => [vx * dt, vy * dt],
         PositionUpdate::Corrected => [x[0] + vx * dt, x[1] + vy * dt],
     }
 }
@@ -73,12 +73,12 @@ pub struct BounceBackConfig {
     /// A tactile sensor touches when its |f| exceeds this (N).
     pub force_threshold: f64,
     /// d_obs looks at the beams within this angle (rad) of the direction of travel; π takes
-    /// every beam (the seed's form), which lets walls beside the robot trigger it.
+    /// every beam (the source's form), which lets walls beside the robot trigger it.
     pub sector_half_angle: f64,
     /// Half-width (rad) of the neighbourhood whose shortest beam scores a direction as free.
     pub free_window: f64,
     /// Between bounces, cap the wrapped planner's speed so it can brake to a stop d_stop (m)
-    /// short of the first obstacle in its path: the seed flips v at once, a robot with an acceleration
+    /// short of the first obstacle in its path: the source flips v at once, a robot with an acceleration
     /// limit cannot, so without the cap it would hit before the reversal takes hold.
     pub d_stop: f64,
 }

@@ -3,7 +3,7 @@
 //!
 //! The window: speeds reachable within `window_dt` from the current (v, ω) under the
 //! acceleration limits, intersected with the speed limits. Each sampled (v, ω) is rolled out over
-//! T_H in steps of `sim_dt` (not the seed's single chord of length T_H, which can tunnel through
+//! T_H in steps of `sim_dt` (not the source's single chord of length T_H, which can tunnel through
 //! an obstacle), checked against the distance field of the grid's occupied cells (O(1) per
 //! point) and the latest scan's hits that the grid does not have yet, and scored by named critics
 //! with weights ([`Critics`]). Rollouts step by `sim_dt` for the first second, 2·`sim_dt` after,
@@ -12,7 +12,7 @@
 //! ([`GlobalPath`], optimistic through unexplored cells) with a carrot `lookahead` m ahead as
 //! the goal and heading critics' target; a robot that stands still short of its aim near an
 //! obstacle turns away from it and creeps clear (`MODE_ESCAPE`).
-//! [`DwaCost::Seed`] keeps the seed's cost (J_goal = −d_goal after one step of T_H, which makes
+//! [`DwaCost::Source`] keeps the source's cost (J_goal = −d_goal after one step of T_H, which makes
 //! the robot flee the goal); [`DwaCost::PythonRobotics`] is PythonRobotics'
 //! dynamic_window_approach.py cost, for the parity test.
 
@@ -61,7 +61,7 @@ pub enum DwaCost {
     #[default]
     Critics,
     /// Algorithms §4.2 as written: one step of T_H, J = −d_goal + Σ(1/d_i)² + |Δv| + |Δω|.
-    Seed,
+    Source,
     /// PythonRobotics: 0.15·|heading error to the goal| + 1.0·(v_max − v) + 1.0/min clearance,
     /// infinite on contact (gains from [`Critics`]: `heading`, `velocity`, `obstacle`).
     PythonRobotics,
@@ -613,7 +613,7 @@ impl Dwa {
         let cfg = &self.config;
         let r = self.limits.radius;
         match cfg.cost {
-            DwaCost::Seed => {
+            DwaCost::Source => {
                 // One step of T_H along the current heading, as written.
                 let th = cfg.predict_time;
                 let x = s.x + th * v * s.theta.cos();
@@ -727,7 +727,7 @@ impl Dwa {
                     let (px, py, pth) = (x, y, th);
                     th += w * dt;
                     // Exact arc for constant (v, ω) would differ by O(ω·dt²); the heading is
-                    // advanced first, as in the seed's and PythonRobotics' motion model.
+                    // advanced first, as in the source's and PythonRobotics' motion model.
                     (sn, cs) = (sn * rc + cs * rs, cs * rc - sn * rs);
                     x += v * cs * dt;
                     y += v * sn * dt;
@@ -1059,12 +1059,12 @@ mod tests {
     }
 
     #[test]
-    fn seed_cost_flees_the_goal_critics_approach_it() {
+    fn source_cost_flees_the_goal_critics_approach_it() {
         let s = DwaState {
             v: 0.0,
             ..Default::default()
         };
-        let seed = facing_goal(DwaCost::Seed).choose(&s);
+        let seed = facing_goal(DwaCost::Source).choose(&s);
         assert!(
             seed.v < 0.0,
             "J_goal = −d_goal: least cost backs away, {seed:?}"

@@ -34,7 +34,7 @@ pub struct Nearest {
 
 /// Algorithms §4: d_obs = min over the beams within `half_angle` of `direction` (robot frame) of
 /// range − radius; `None` when no beam is in the sector. `half_angle ≥ π` takes every beam,
-/// the seed's form; a sector around the direction of travel keeps walls beside or behind the
+/// the source's form; a sector around the direction of travel keeps walls beside or behind the
 /// robot, which it is not moving toward, from triggering.
 pub fn nearest_obstacle(
     scan: &Scan,
@@ -252,7 +252,7 @@ mod tests {
         // Looking backwards, only the far (range_max) beams remain.
         let back = nearest_obstacle(&s, 0.2, PI, FRAC_PI_2).map(|n| n.d_obs);
         assert!(back.is_some_and(|d| d > 1.0), "{back:?}");
-        // The seed's form takes every beam.
+        // The source's form takes every beam.
         let all = nearest_obstacle(&s, 0.2, PI, PI).map(|n| n.d_obs);
         assert!(all.is_some_and(|d| (d - 0.3).abs() < 1e-6));
     }

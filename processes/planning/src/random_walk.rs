@@ -52,9 +52,9 @@ pub fn variance_1d(k: u64, p: f64) -> f64 {
 /// The diagonal stride of the 2-D walk for an orthogonal stride of r cells (algorithms §3.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum DiagonalStride {
-    /// The seed's ⌊r/√2⌋ cells per axis: 0 for r = 1, so every diagonal move stands still
+    /// The source's ⌊r/√2⌋ cells per axis: 0 for r = 1, so every diagonal move stands still
     /// (docs/errata.md).
-    Seed,
+    Source,
     /// max(1, round(r/√2)) cells per axis: the nearest stride of Euclidean length ≈ r that moves.
     #[default]
     Rounded,
@@ -65,7 +65,7 @@ impl DiagonalStride {
     pub fn cells(self, r: u32) -> u32 {
         let d = r as f64 / SQRT_2;
         match self {
-            DiagonalStride::Seed => d.floor() as u32,
+            DiagonalStride::Source => d.floor() as u32,
             DiagonalStride::Rounded => (d.round() as u32).max(1),
         }
     }
@@ -122,7 +122,7 @@ pub const MAX_WALK_CELLS: usize = 1 << 26;
 
 /// Algorithms §3.3: a walk on an m × n grid choosing one of the 8 directions uniformly at random each
 /// step, r cells orthogonally and [`DiagonalStride::cells`] diagonally, reporting the area
-/// covered. Only moves that stay on the grid are drawn (the seed leaves the border open).
+/// covered. Only moves that stay on the grid are drawn (the source leaves the border open).
 pub fn walk_2d<R: Rng + ?Sized>(rng: &mut R, walk: &Walk2d) -> Result<WalkReport, PlanningError> {
     let Walk2d {
         m,
@@ -571,24 +571,24 @@ mod tests {
 
     #[test]
     fn diagonal_strides() {
-        assert_eq!(DiagonalStride::Seed.cells(1), 0);
+        assert_eq!(DiagonalStride::Source.cells(1), 0);
         assert_eq!(DiagonalStride::Rounded.cells(1), 1);
-        assert_eq!(DiagonalStride::Seed.cells(3), 2);
+        assert_eq!(DiagonalStride::Source.cells(3), 2);
         assert_eq!(DiagonalStride::Rounded.cells(3), 2);
-        assert_eq!(DiagonalStride::Seed.cells(10), 7);
+        assert_eq!(DiagonalStride::Source.cells(10), 7);
         assert_eq!(DiagonalStride::Rounded.cells(10), 7);
-        assert_eq!(DiagonalStride::Seed.cells(5), 3);
+        assert_eq!(DiagonalStride::Source.cells(5), 3);
         assert_eq!(DiagonalStride::Rounded.cells(5), 4);
     }
 
     #[test]
-    fn seed_diagonal_stride_stands_still_the_rounded_one_never_does() {
+    fn source_diagonal_stride_stands_still_the_rounded_one_never_does() {
         let walk = Walk2d {
             m: 50,
             n: 40,
             r: 1,
             steps: 4000,
-            diagonal: DiagonalStride::Seed,
+            diagonal: DiagonalStride::Source,
             start: (25, 20),
         };
         let seed = walk_2d(&mut ChaCha8Rng::seed_from_u64(1), &walk);
@@ -650,7 +650,7 @@ mod tests {
             n: 5,
             r: 1,
             steps: 10,
-            diagonal: DiagonalStride::Seed,
+            diagonal: DiagonalStride::Source,
             start: (0, 0),
         };
         let mut rng = ChaCha8Rng::seed_from_u64(0);

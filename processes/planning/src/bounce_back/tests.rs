@@ -97,13 +97,13 @@ impl Rig {
 }
 
 #[test]
-fn seed_position_update_drops_x_t() {
+fn source_position_update_drops_x_t() {
     let (x, v, alpha, dt) = ([2.0, 3.0], [0.4, -0.2], 0.5, 0.1);
     assert_eq!(bounce_back_velocity(v, alpha), [-0.2, 0.1]);
     let corrected = bounce_back_position(x, v, alpha, dt, PositionUpdate::Corrected);
-    let seed = bounce_back_position(x, v, alpha, dt, PositionUpdate::Seed);
+    let seed = bounce_back_position(x, v, alpha, dt, PositionUpdate::Source);
     assert!((corrected[0] - 1.98).abs() < 1e-12 && (corrected[1] - 3.01).abs() < 1e-12);
-    // The seed's form is the displacement alone: the robot would jump back to the origin.
+    // The source's form is the displacement alone: the robot would jump back to the origin.
     assert!((seed[0] + 0.02).abs() < 1e-12 && (seed[1] - 0.01).abs() < 1e-12);
     assert!(
         (corrected[0] - seed[0] - x[0]).abs() < 1e-12
