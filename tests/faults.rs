@@ -490,16 +490,23 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
             std::thread::sleep(Duration::from_millis(5));
         }
     };
+    // Every process of this stack, the killed ones too: the files they made are the ones
+    // counted (other stacks on the machine come and go as they like).
+    let mut pids: std::collections::BTreeSet<u32> =
+        processes_of(&stack.namespace).into_iter().collect();
+    pids.insert(stack.pid());
     // Both snapshots in the same state: the restarted process ready, the dead one cleaned.
-    let snapshot = |starts: usize| {
+    let snapshot = |starts: usize, pids: &mut std::collections::BTreeSet<u32>| {
         wait_ready(starts);
         std::thread::sleep(Duration::from_millis(300));
-        (shm_files(), open_fds(stack.pid()))
+        pids.extend(processes_of(&stack.namespace));
+        (made_by(&shm_files(), pids), open_fds(stack.pid()))
     };
     for cycle in 1..=100 {
         // Kill a running process, not one still creating its node: iceoryx2 0.10 cannot clean
         // a node killed before it wrote its details (see the README's fault notes).
         wait_ready(cycle);
+        pids.insert(pid);
         signal(pid, nix::sys::signal::Signal::SIGKILL);
         pid = wait_for_new_pid(
             &stack.namespace,
@@ -508,11 +515,12 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
             Duration::from_secs(10),
             &stack.out,
         );
+        pids.insert(pid);
         if cycle == 10 {
-            (shm_at_10, fds_at_10) = snapshot(cycle + 1);
+            (shm_at_10, fds_at_10) = snapshot(cycle + 1, &mut pids);
         }
     }
-    let (shm_at_100, fds_at_100) = snapshot(101);
+    let (shm_at_100, fds_at_100) = snapshot(101, &mut pids);
     assert!(
         shm_at_100.len() <= shm_at_10.len(),
         "shared-memory files grew from {} (cycle 10) to {} (cycle 100): {:?}",

@@ -72,26 +72,6 @@ fn records() -> BTreeSet<String> {
         .collect()
 }
 
-/// The PIDs of the processes that made a record. iceoryx2 (0.10) names node records, services'
-/// segments and ports' segments by system-wide ids whose bits 64..96 are the creating process's
-/// PID; a name holds one or two such ids.
-fn makers(record: &str) -> Vec<u32> {
-    let name = record.rsplit('/').next().unwrap_or(record);
-    name.split(|c: char| !c.is_ascii_digit())
-        .filter(|digits| digits.len() >= 20)
-        .filter_map(|digits| digits.parse::<u128>().ok())
-        .map(|id| (id >> 64) as u32)
-        .collect()
-}
-
-/// The records in `now` that processes of `pids` made.
-fn made_by(now: &BTreeSet<String>, pids: &BTreeSet<u32>) -> Vec<String> {
-    now.iter()
-        .filter(|r| makers(r).iter().any(|pid| pids.contains(pid)))
-        .cloned()
-        .collect()
-}
-
 /// 50 cycles of starting the six processes and killing them at varied early moments, then one
 /// normal `mole up`, leave no node record or shared memory of the killed processes, and the
 /// launcher warns about no dead node.

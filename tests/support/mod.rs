@@ -388,3 +388,26 @@ pub fn wait_for_new_pid(
 pub fn signal(pid: u32, signal: nix::sys::signal::Signal) {
     nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), signal).expect("signal");
 }
+
+/// The PIDs of the processes that made a record. iceoryx2 (0.10) names node records, services'
+/// segments and ports' segments by system-wide ids whose bits 64..96 are the creating process's
+/// PID; a name holds one or two such ids.
+pub fn makers(record: &str) -> Vec<u32> {
+    let name = record.rsplit('/').next().unwrap_or(record);
+    name.split(|c: char| !c.is_ascii_digit())
+        .filter(|digits| digits.len() >= 20)
+        .filter_map(|digits| digits.parse::<u128>().ok())
+        .map(|id| (id >> 64) as u32)
+        .collect()
+}
+
+/// The records in `now` that processes of `pids` made.
+pub fn made_by<'a>(
+    now: impl IntoIterator<Item = &'a String>,
+    pids: &std::collections::BTreeSet<u32>,
+) -> Vec<String> {
+    now.into_iter()
+        .filter(|r| makers(r).iter().any(|pid| pids.contains(pid)))
+        .cloned()
+        .collect()
+}
