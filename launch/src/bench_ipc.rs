@@ -1,4 +1,5 @@
-//! `mole bench ipc`: the runtime against raw iceoryx2, a Unix socket and TCP, in one run.
+//! `mole bench ipc`: the runtime against raw iceoryx2, a Unix socket, TCP and the floor under
+//! them (a plain pipe wake-up between two processes), in one run.
 
 use crate::bench_stack::check_writable;
 use crate::up::Failure;

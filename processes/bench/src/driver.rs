@@ -1,18 +1,21 @@
 //! The driver: starts the probe groups, runs every measurement, and cleans up after them.
 
+use crate::floor::{Pinning, PipePair, Placement};
 use crate::link::{self, Link, STOP, StreamLink};
 use crate::messages::with_message_type;
 use crate::probe::{CHAIN_HOPS, driver_ports};
 use crate::roles;
 use crate::{
-    BenchError, ChainPoint, FanoutPoint, IpcBenchConfig, IpcReport, LatencyPoint, PROBE_BINARY,
-    ProbeArgs, ProbeKind, Ratio, Summary, ThroughputPoint, Transport, WakeMode,
+    BenchError, ChainPoint, FanoutPoint, FloorPoint, IpcBenchConfig, IpcReport, LatencyPoint,
+    PROBE_BINARY, ProbeArgs, ProbeKind, Ratio, Summary, ThroughputPoint, Transport, WakeMode,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 use std::cell::Cell;
+use std::fs::File;
+use std::os::fd::OwnedFd;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// How long the probes of a group get to come up and answer the hand-shake.
@@ -99,6 +102,27 @@ impl Probes {
             probes.children.push(child);
         }
         Ok(probes)
+    }
+
+    /// One probe whose standard input and output are pipes from and to the driver.
+    fn spawn_piped(
+        exe: &Path,
+        args: &ProbeArgs,
+    ) -> Result<(Probes, ChildStdin, ChildStdout), BenchError> {
+        let mut child = Command::new(exe)
+            .args(args.to_args())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(BenchError::Spawn)?;
+        let pipes = child.stdin.take().zip(child.stdout.take());
+        let probes = Probes {
+            children: vec![child],
+        };
+        let (stdin, stdout) =
+            pipes.ok_or_else(|| BenchError::Internal("the probe has no pipes".to_string()))?;
+        Ok((probes, stdin, stdout))
     }
 
     /// Why a probe already exited, if one did.
@@ -292,6 +316,19 @@ impl Driver<'_> {
                 started.finish(GRACE)?;
                 Ok(result)
             }
+            Transport::Pipe => {
+                let (started, stdin, stdout) = Probes::spawn_piped(&self.probe, &args(0, None))?;
+                let pipes = PipePair::new(
+                    File::from(OwnedFd::from(stdout)),
+                    File::from(OwnedFd::from(stdin)),
+                    Some(self.timeout),
+                );
+                let mut link = StreamLink::new(pipes, size);
+                let result = drive(&mut link)?;
+                drop(link);
+                started.finish(GRACE)?;
+                Ok(result)
+            }
         }
     }
 
@@ -306,7 +343,7 @@ impl Driver<'_> {
         let timeout = self.timeout;
         let mut s = self.group(transport, ProbeKind::Latency, size, wake, 1, |link| {
             roles::handshake(link, 1, Instant::now() + STARTUP)?;
-            roles::drive_latency(link, 1, warm, samples, timeout)
+            roles::drive_latency(link, 1, warm, samples, None, timeout)
         })?;
         Ok(LatencyPoint {
             transport,
@@ -362,7 +399,7 @@ impl Driver<'_> {
             subscribers,
             |link| {
                 roles::handshake(link, subscribers, Instant::now() + STARTUP)?;
-                roles::drive_latency(link, subscribers, warm, samples, timeout)
+                roles::drive_latency(link, subscribers, warm, samples, None, timeout)
             },
         )?;
         Ok(FanoutPoint {
@@ -404,6 +441,35 @@ impl Driver<'_> {
         ])
     }
 
+    /// The pipe wake-up floor for `placement` at `rate_hz` (None: flat out). The driver's
+    /// thread is pinned to the probe's CPU while the probe is spawned (it inherits the mask),
+    /// then to its own; refused pinning runs both unpinned and says why.
+    fn floor(&self, placement: Placement, rate_hz: Option<f64>) -> Result<FloorPoint, BenchError> {
+        let (samples, warm) = match rate_hz {
+            None => (self.config.floor_samples, 100),
+            Some(_) => (self.config.floor_paced_samples, 3),
+        };
+        let warm = warm.min(samples.div_ceil(10));
+        let period = rate_hz.map(|hz| Duration::from_secs_f64(1.0 / hz));
+        let timeout = self.timeout + period.unwrap_or_default();
+        let mut pinning = Pinning::for_spawn(placement);
+        let kind = ProbeKind::Latency;
+        let size = self.config.fanout_size;
+        let mut s = self.group(Transport::Pipe, kind, size, WakeMode::Blocking, 1, |link| {
+            pinning.move_to_waker();
+            roles::handshake(link, 1, Instant::now() + STARTUP)?;
+            roles::drive_latency(link, 1, warm, samples, period, timeout)
+        })?;
+        Ok(FloorPoint {
+            transport: Transport::Pipe,
+            placement,
+            rate_hz,
+            cpus: pinning.cpus,
+            unpinned: pinning.unpinned.take(),
+            latency: summarize(&mut s.latency)?,
+        })
+    }
+
     fn run(&self) -> Result<IpcReport, BenchError> {
         let c = self.config;
         let mut report = IpcReport {
@@ -413,8 +479,14 @@ impl Driver<'_> {
             throughput: Vec::new(),
             fanout: Vec::new(),
             chain: Vec::new(),
+            floor: Vec::new(),
             ratios: Vec::new(),
         };
+        for placement in [Placement::Same, Placement::Other] {
+            for rate_hz in [None, Some(c.floor_rate_hz)] {
+                report.floor.push(self.floor(placement, rate_hz)?);
+            }
+        }
         for &size in &c.sizes {
             for transport in [Transport::Runtime, Transport::Raw] {
                 for wake in [WakeMode::Busy, WakeMode::Event] {
@@ -555,5 +627,49 @@ pub(crate) fn ratios(report: &IpcReport) -> Vec<Ratio> {
             p50(lat, Transport::Runtime, wake, 1 << 20),
         );
     }
+    floor_ratios(report, &mut out);
     out
+}
+
+/// How far each event-woken hop of the runtime and raw iceoryx2 is from the pipe floor: a
+/// ping-pong hop (at the floor's message size) against the floor flat out, a hop of the paced
+/// chain (its p50 over its hops) against the paced floor; for each placement of the floor.
+fn floor_ratios(report: &IpcReport, out: &mut Vec<Ratio>) {
+    let size = report.config.fanout_size;
+    for placement in [Placement::Same, Placement::Other] {
+        let floor = |paced: bool| {
+            report
+                .floor
+                .iter()
+                .find(|f| f.placement == placement && f.rate_hz.is_some() == paced)
+                .map(|f| f.latency.p50_us)
+        };
+        for transport in [Transport::Runtime, Transport::Raw] {
+            push_ratio(
+                out,
+                format!(
+                    "{} event hop / pipe floor p50, flat out, {}",
+                    transport.as_str(),
+                    placement.as_str()
+                ),
+                p50(&report.latency, transport, WakeMode::Event, size),
+                floor(false),
+            );
+            let chain_hop = report
+                .chain
+                .iter()
+                .find(|c| c.transport == transport && c.rate_hz.is_some())
+                .map(|c| c.latency.p50_us / c.hops.max(1) as f64);
+            push_ratio(
+                out,
+                format!(
+                    "{} chain hop / pipe floor p50, paced, {}",
+                    transport.as_str(),
+                    placement.as_str()
+                ),
+                chain_hop,
+                floor(true),
+            );
+        }
+    }
 }

@@ -7,12 +7,15 @@
 //!   of writing the payload reported apart from the hand-off (loan → send → receive);
 //! - throughput with one publisher flat out;
 //! - fan-out latency to the last of 1, 2, 4, 8 subscribers;
-//! - a five-hop event chain, flat out and paced at 100 Hz.
+//! - a five-hop event chain, flat out and paced at 100 Hz;
+//! - the floor under them all: a plain pipe wake-up between two processes, on the same CPU and
+//!   on two CPUs, flat out and paced at 100 Hz.
 //!
 //! Every sample is kept (no filtering); send and receive times are CLOCK_MONOTONIC on the same
 //! machine. This crate is, with mole-runtime, the one place that names iceoryx2 types.
 
 mod driver;
+mod floor;
 mod link;
 pub mod messages;
 mod probe;
@@ -21,6 +24,7 @@ mod roles;
 mod summary;
 
 pub use driver::{find_probe, live_bench_nodes, run_ipc_bench};
+pub use floor::Placement;
 pub use probe::{ProbeArgs, run_probe};
 pub use report::{format_table, print_table, render_svg, write_plot};
 pub use summary::Summary;
@@ -75,6 +79,9 @@ pub enum Transport {
     Unix,
     /// TCP on 127.0.0.1 with TCP_NODELAY.
     Tcp,
+    /// A pipe each way between two processes (one write wakes a blocking read): the OS
+    /// wake-up floor.
+    Pipe,
 }
 
 impl Transport {
@@ -85,6 +92,7 @@ impl Transport {
             Transport::Raw => "raw iceoryx2",
             Transport::Unix => "unix socket",
             Transport::Tcp => "tcp",
+            Transport::Pipe => "pipe",
         }
     }
     /// Whether this is a shared-memory transport (has both wake-up modes).
@@ -101,7 +109,7 @@ pub enum WakeMode {
     Busy,
     /// Sleeps in a WaitSet until the publisher's event.
     Event,
-    /// A blocking socket read (sockets only).
+    /// A blocking read (sockets and pipes only).
     Blocking,
 }
 
@@ -156,6 +164,12 @@ pub struct IpcBenchConfig {
     pub chain_paced_samples: usize,
     /// The paced chain's rate (Hz).
     pub chain_rate_hz: f64,
+    /// Measured wake-ups per floor point flat out.
+    pub floor_samples: usize,
+    /// Measured wake-ups per floor point when paced.
+    pub floor_paced_samples: usize,
+    /// The paced floor's rate (Hz): the driver sleeps until the next slot, then wakes the probe.
+    pub floor_rate_hz: f64,
     /// How long to wait for one acknowledgement before giving up (ms).
     pub timeout_ms: u64,
     /// The probe binary; found next to the current executable when `None`.
@@ -176,6 +190,9 @@ impl Default for IpcBenchConfig {
             chain_samples: 2000,
             chain_paced_samples: 300,
             chain_rate_hz: 100.0,
+            floor_samples: 2000,
+            floor_paced_samples: 300,
+            floor_rate_hz: 100.0,
             timeout_ms: 5000,
             probe: None,
         }
@@ -183,7 +200,8 @@ impl Default for IpcBenchConfig {
 }
 
 impl IpcBenchConfig {
-    /// A short run: sizes 64 B and 1 MiB, few samples, fan-out 1 and 2, short throughput.
+    /// A short run: sizes 64 B and 1 MiB, few samples, fan-out 1 and 2, short throughput, every
+    /// floor point.
     pub fn quick() -> Self {
         IpcBenchConfig {
             sizes: vec![64, 1 << 20],
@@ -194,6 +212,8 @@ impl IpcBenchConfig {
             fanout_samples: 30,
             chain_samples: 30,
             chain_paced_samples: 10,
+            floor_samples: 50,
+            floor_paced_samples: 10,
             ..IpcBenchConfig::default()
         }
     }
@@ -226,6 +246,8 @@ impl IpcBenchConfig {
             || self.fanout_samples == 0
             || self.chain_samples == 0
             || self.chain_paced_samples == 0
+            || self.floor_samples == 0
+            || self.floor_paced_samples == 0
         {
             return fail("every sample count must be at least 1");
         }
@@ -234,6 +256,9 @@ impl IpcBenchConfig {
         }
         if !(self.chain_rate_hz.is_finite() && self.chain_rate_hz > 0.0) {
             return fail("the chain rate must be positive");
+        }
+        if !(self.floor_rate_hz.is_finite() && self.floor_rate_hz > 0.0) {
+            return fail("the floor rate must be positive");
         }
         if self.fanout.iter().any(|&n| n == 0 || n > MAX_FANOUT) {
             return fail("fan-out subscriber counts must be within 1..=8");
@@ -313,6 +338,25 @@ pub struct ChainPoint {
     pub latency: Summary,
 }
 
+/// One process waking another through a pipe (ping-pong: the probe echoes the moment its
+/// blocking read returned): the floor under every event-woken transport.
+#[derive(Debug, Clone, Serialize)]
+pub struct FloorPoint {
+    /// Always [`Transport::Pipe`].
+    pub transport: Transport,
+    /// Where the driver (the waker) and the probe (the sleeper) ran.
+    pub placement: Placement,
+    /// `None`: flat out (the next wake-up right after the echo came back); else the rate, the
+    /// driver sleeping until the next slot before each wake-up.
+    pub rate_hz: Option<f64>,
+    /// The CPUs (driver, probe) were pinned to; `None` when pinning was refused.
+    pub cpus: Option<[usize; 2]>,
+    /// Why both ran unpinned (the row still measures, wherever the scheduler put them).
+    pub unpinned: Option<String>,
+    /// Driver's write → the probe's read returned.
+    pub latency: Summary,
+}
+
 /// A named ratio of two p50s.
 #[derive(Debug, Clone, Serialize)]
 pub struct Ratio {
@@ -331,8 +375,11 @@ pub struct IpcReport {
     pub throughput: Vec<ThroughputPoint>,
     pub fanout: Vec<FanoutPoint>,
     pub chain: Vec<ChainPoint>,
+    /// The pipe wake-up floor: same CPU and other CPU, each flat out and paced.
+    pub floor: Vec<FloorPoint>,
     /// runtime / raw per hop (per size and wake mode, and per chain), hand-off growth from the
-    /// smallest to the largest size, Unix socket / runtime at 1 MiB.
+    /// smallest to the largest size, Unix socket / runtime at 1 MiB, each event-woken hop of
+    /// the runtime and raw iceoryx2 / the pipe floor.
     pub ratios: Vec<Ratio>,
 }
 
@@ -369,6 +416,12 @@ mod tests {
         assert!(c.validate().is_err());
         let mut c = IpcBenchConfig::quick();
         c.sizes.clear();
+        assert!(c.validate().is_err());
+        let mut c = IpcBenchConfig::quick();
+        c.floor_paced_samples = 0;
+        assert!(c.validate().is_err());
+        let mut c = IpcBenchConfig::quick();
+        c.floor_rate_hz = 0.0;
         assert!(c.validate().is_err());
     }
 }

@@ -1,8 +1,10 @@
 //! The probe process's side: its command line, its ports, and the role it plays.
 
+use crate::floor::PipePair;
 use crate::link::{self, Link, PortSpec, Ports, StreamLink};
 use crate::messages::with_message_type;
 use crate::{BenchError, ProbeKind, Transport, WakeMode, roles};
+use std::os::fd::AsFd;
 use std::time::{Duration, Instant};
 
 /// How long a probe tries to connect its socket to the driver.
@@ -120,10 +122,12 @@ pub struct ProbeArgs {
     /// This probe's index in its group (fan-out) or its hop (chain).
     #[arg(long, default_value_t = 0)]
     pub id: u32,
-    /// Sockets: the Unix socket path or the TCP `127.0.0.1:<port>` to connect to.
+    /// Sockets: the Unix socket path or the TCP `127.0.0.1:<port>` to connect to (a pipe probe
+    /// reads its standard input and writes its standard output).
     #[arg(long)]
     pub address: Option<String>,
-    /// Exit with an error after this long without a message (ms): the driver is gone.
+    /// Exit with an error after this long without a message (ms): the driver is gone (a pipe
+    /// probe instead ends when the driver's end of its pipe closes).
     #[arg(long, default_value_t = 30_000)]
     pub idle_ms: u64,
 }
@@ -216,6 +220,16 @@ pub fn run_probe(args: &ProbeArgs) -> Result<(), BenchError> {
                 .set_read_timeout(Some(idle))
                 .map_err(io("socket timeout"))?;
             role(&mut StreamLink::new(stream, args.size))
+        }
+        Transport::Pipe => {
+            let own = |fd: std::os::fd::BorrowedFd<'_>| {
+                fd.try_clone_to_owned()
+                    .map(std::fs::File::from)
+                    .map_err(io("probe pipe"))
+            };
+            let rx = own(std::io::stdin().as_fd())?;
+            let tx = own(std::io::stdout().as_fd())?;
+            role(&mut StreamLink::new(PipePair::new(rx, tx, None), args.size))
         }
     }
 }

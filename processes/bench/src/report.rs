@@ -27,6 +27,11 @@ fn rate_label(per_s: f64) -> String {
     }
 }
 
+/// `flat out` or `100 Hz`.
+fn pacing_label(rate_hz: Option<f64>) -> String {
+    rate_hz.map_or("flat out".to_string(), |hz| format!("{hz} Hz"))
+}
+
 fn summary_cells(s: &Summary) -> String {
     format!(
         "{:>7} {:>10.2} {:>10.2} {:>10.2} {:>10.2}",
@@ -62,6 +67,32 @@ pub fn format_table(report: &IpcReport) -> String {
             p.handoff.p50_us,
             p.fill.p50_us
         );
+    }
+    let _ = writeln!(
+        t,
+        "\nwake-up floor: a pipe between two processes, write → the blocking read returns\n\
+         {:<13} {:<9} {:>9} {:>8} {head}",
+        "transport", "placement", "pacing", "CPUs"
+    );
+    for p in &report.floor {
+        let cpus = p
+            .cpus
+            .map_or("unpinned".to_string(), |[a, b]| format!("{a} → {b}"));
+        let _ = write!(
+            t,
+            "{:<13} {:<9} {:>9} {:>8} {}",
+            p.transport.as_str(),
+            p.placement.as_str(),
+            pacing_label(p.rate_hz),
+            cpus,
+            summary_cells(&p.latency)
+        );
+        match &p.unpinned {
+            Some(why) => {
+                let _ = writeln!(t, "  ({why})");
+            }
+            None => t.push('\n'),
+        }
     }
     let _ = writeln!(
         t,
@@ -101,20 +132,17 @@ pub fn format_table(report: &IpcReport) -> String {
         "transport", "pacing"
     );
     for p in &report.chain {
-        let pacing = p
-            .rate_hz
-            .map_or("flat out".to_string(), |hz| format!("{hz} Hz"));
         let _ = writeln!(
             t,
             "{:<13} {:>9} {}",
             p.transport.as_str(),
-            pacing,
+            pacing_label(p.rate_hz),
             summary_cells(&p.latency)
         );
     }
     let _ = writeln!(t, "\nratios");
     for r in &report.ratios {
-        let _ = writeln!(t, "  {:<52} {:>8.2}", r.what, r.value);
+        let _ = writeln!(t, "  {:<60} {:>8.2}", r.what, r.value);
     }
     t
 }
@@ -136,9 +164,12 @@ const BOTTOM: f64 = 60.0;
 const COLORS: [&str; 8] = [
     "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
 ];
+/// The floor's dashed lines: none of the series' colours.
+const FLOOR_COLORS: [&str; 4] = ["#000000", "#17becf", "#bcbd22", "#8c8c8c"];
 
 /// The latency plot: p50 (µs) against payload size (bytes), both axes logarithmic, one line per
-/// transport and wake-up mode, with a legend.
+/// transport and wake-up mode, the pipe wake-up floor's p50s as dashed horizontal lines (they
+/// do not depend on the payload), with a legend.
 pub fn render_svg(report: &IpcReport) -> String {
     // One series per (transport, wake), in the report's order.
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
@@ -156,6 +187,19 @@ pub fn render_svg(report: &IpcReport) -> String {
     for (_, points) in &mut series {
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
+    let floors: Vec<(String, f64)> = report
+        .floor
+        .iter()
+        .filter(|f| f.latency.p50_us > 0.0 && f.latency.p50_us.is_finite())
+        .map(|f| {
+            let name = format!(
+                "pipe floor, {}, {}",
+                f.placement.as_str(),
+                pacing_label(f.rate_hz)
+            );
+            (name, f.latency.p50_us)
+        })
+        .collect();
     let all = series.iter().flat_map(|(_, p)| p.iter());
     let (mut x_lo, mut x_hi, mut y_lo, mut y_hi) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y) in all {
@@ -164,8 +208,15 @@ pub fn render_svg(report: &IpcReport) -> String {
         y_lo = y_lo.min(y.log10());
         y_hi = y_hi.max(y.log10());
     }
+    for (_, y) in &floors {
+        y_lo = y_lo.min(y.log10());
+        y_hi = y_hi.max(y.log10());
+    }
     if x_lo > x_hi {
-        (x_lo, x_hi, y_lo, y_hi) = (6.0, 22.0, 0.0, 3.0);
+        (x_lo, x_hi) = (6.0, 22.0);
+    }
+    if y_lo > y_hi {
+        (y_lo, y_hi) = (0.0, 3.0);
     }
     if x_hi - x_lo < 1.0 {
         x_lo -= 1.0;
@@ -261,6 +312,24 @@ pub fn render_svg(report: &IpcReport) -> String {
             name
         );
     }
+    for (j, (name, p50)) in floors.iter().enumerate() {
+        let color = FLOOR_COLORS[j % FLOOR_COLORS.len()];
+        let y = py(p50.log10());
+        let ly = TOP + 16.0 + 18.0 * (series.len() + j) as f64;
+        let _ = writeln!(
+            s,
+            r#"<line x1="{LEFT}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{color}" stroke-width="1.5" stroke-dasharray="6 4"/>"#,
+            LEFT + plot_w
+        );
+        let _ = writeln!(
+            s,
+            r#"<line x1="{:.1}" y1="{ly:.1}" x2="{:.1}" y2="{ly:.1}" stroke="{color}" stroke-width="1.5" stroke-dasharray="6 4"/><text x="{:.1}" y="{:.1}">{name}</text>"#,
+            LEFT + 12.0,
+            LEFT + 36.0,
+            LEFT + 42.0,
+            ly + 4.0,
+        );
+    }
     s.push_str("</svg>\n");
     s
 }
@@ -284,7 +353,9 @@ pub fn write_plot(report: &IpcReport, path: impl AsRef<Path>) -> Result<(), Benc
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{IpcBenchConfig, LatencyPoint, Transport, WakeMode};
+    use crate::{
+        ChainPoint, FloorPoint, IpcBenchConfig, LatencyPoint, Placement, Transport, WakeMode,
+    };
 
     fn summary(p50: f64) -> Summary {
         Summary {
@@ -320,13 +391,37 @@ mod tests {
                 });
             }
         }
+        let chain = vec![ChainPoint {
+            transport: Transport::Raw,
+            hops: 5,
+            rate_hz: Some(100.0),
+            latency: summary(500.0),
+        }];
+        let floor = [
+            (Placement::Same, None, 5.0),
+            (Placement::Same, Some(100.0), 20.0),
+            (Placement::Other, None, 50.0),
+            (Placement::Other, Some(100.0), 100.0),
+        ]
+        .into_iter()
+        .map(|(placement, rate_hz, p50)| FloorPoint {
+            transport: Transport::Pipe,
+            placement,
+            rate_hz,
+            cpus: (placement == Placement::Same).then_some([0, 0]),
+            unpinned: (placement == Placement::Other)
+                .then(|| "CPU 0 is the only one allowed".to_string()),
+            latency: summary(p50),
+        })
+        .collect();
         let mut r = IpcReport {
             config: IpcBenchConfig::quick(),
             cpus: 2,
             latency,
             throughput: Vec::new(),
             fanout: Vec::new(),
-            chain: Vec::new(),
+            chain,
+            floor,
             ratios: Vec::new(),
         };
         r.ratios = crate::driver::ratios(&r);
@@ -352,6 +447,49 @@ mod tests {
     }
 
     #[test]
+    fn ratios_to_the_floor_divide_a_hop_by_the_pipe_wake_up() {
+        let mut r = report();
+        r.latency.push(LatencyPoint {
+            transport: Transport::Raw,
+            wake: WakeMode::Event,
+            size: 64,
+            latency: summary(40.0),
+            handoff: summary(41.0),
+            fill: summary(0.1),
+        });
+        r.ratios = crate::driver::ratios(&r);
+        let get = |what: &str| r.ratios.iter().find(|x| x.what == what).map(|x| x.value);
+        let hop = "raw iceoryx2 event hop / pipe floor p50, flat out";
+        assert_eq!(get(&format!("{hop}, same CPU")), Some(8.0));
+        assert_eq!(get(&format!("{hop}, other CPU")), Some(0.8));
+        let chain = "raw iceoryx2 chain hop / pipe floor p50, paced";
+        assert_eq!(
+            get(&format!("{chain}, same CPU")),
+            Some(5.0),
+            "500 µs / 5 hops / 20"
+        );
+        assert_eq!(get(&format!("{chain}, other CPU")), Some(1.0));
+        assert_eq!(
+            get("runtime event hop / pipe floor p50, flat out, same CPU"),
+            None,
+            "no runtime event point, no ratio"
+        );
+    }
+
+    #[test]
+    fn floor_rows_say_where_they_ran_and_why_unpinned() {
+        let table = format_table(&report());
+        let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("pipe")).collect();
+        assert_eq!(rows.len(), 4, "{table}");
+        assert!(rows[0].contains("same CPU") && rows[0].contains("flat out"));
+        assert!(rows[0].contains("0 → 0") && rows[0].contains("5.00"));
+        assert!(rows[1].contains("100 Hz") && rows[1].contains("20.00"));
+        assert!(rows[3].contains("other CPU") && rows[3].contains("unpinned"));
+        assert!(rows[3].contains("(CPU 0 is the only one allowed)"));
+        assert!(table.contains("wake-up floor"));
+    }
+
+    #[test]
     fn the_plot_has_one_line_per_series_and_a_legend() {
         let svg = render_svg(&report());
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
@@ -364,10 +502,18 @@ mod tests {
         ] {
             assert!(svg.contains(name), "legend names {name}");
         }
+        assert_eq!(
+            svg.matches("stroke-dasharray").count(),
+            2 * 4,
+            "each floor: a dashed line and its legend"
+        );
+        assert!(svg.contains("pipe floor, other CPU, 100 Hz"));
         assert!(!svg.contains("NaN") && !svg.contains("inf"));
         // An empty report still renders axes.
         let mut empty = report();
         empty.latency.clear();
+        assert!(render_svg(&empty).contains("</svg>"));
+        empty.floor.clear();
         assert!(render_svg(&empty).contains("</svg>"));
     }
 

@@ -2,6 +2,7 @@
 //! fan-out, chain) and the probes' side (echo, sink, hop).
 
 use crate::BenchError;
+use crate::floor::next_slot;
 use crate::link::{Link, Received, STOP, WARMUP};
 use crate::messages::BenchAck;
 use std::time::{Duration, Instant};
@@ -76,12 +77,14 @@ pub(crate) fn handshake(
 }
 
 /// Ping-pong: sends `warm + samples` messages one at a time (payload written each time), each
-/// after every probe acknowledged the previous one; keeps the last `samples`.
+/// after every probe acknowledged the previous one (`period` None: flat out) or, paced, on the
+/// next slot of `period` after that; keeps the last `samples`.
 pub(crate) fn drive_latency(
     link: &mut dyn Link,
     probes: usize,
     warm: usize,
     samples: usize,
+    period: Option<Duration>,
     timeout: Duration,
 ) -> Result<LatencySamples, BenchError> {
     let all = all_probes(probes);
@@ -90,7 +93,12 @@ pub(crate) fn drive_latency(
         handoff: Vec::with_capacity(samples),
         fill: Vec::with_capacity(samples),
     };
+    let start = Instant::now();
     for k in 0..(warm + samples) as u64 {
+        if let Some(period) = period {
+            let now = Instant::now();
+            std::thread::sleep(next_slot(start, period, now) - now);
+        }
         let times = link.send(k, None, true)?;
         let deadline = Instant::now() + timeout;
         let (mut seen, mut send_ns, mut last_recv_ns) = (0u64, 0u64, 0u64);
@@ -310,6 +318,7 @@ mod tests {
         data: VecDeque<Received>,
         acks: VecDeque<BenchAck>,
         sent: Vec<u64>,
+        sent_at: Vec<Instant>,
     }
 
     impl Link for Loopback {
@@ -321,6 +330,7 @@ mod tests {
         ) -> Result<SendTimes, BenchError> {
             self.now += 1000;
             self.sent.push(seq);
+            self.sent_at.push(Instant::now());
             let send_ns = self.now;
             self.data.push_back(Received {
                 seq,
@@ -373,6 +383,7 @@ mod tests {
             data: VecDeque::new(),
             acks: VecDeque::new(),
             sent: Vec::new(),
+            sent_at: Vec::new(),
         }
     }
 
@@ -380,11 +391,28 @@ mod tests {
     fn latency_is_to_the_last_probe_and_handoff_adds_the_loan() {
         let mut link = loopback(3);
         handshake(&mut link, 3, Instant::now() + Duration::from_secs(1)).expect("handshake");
-        let s = drive_latency(&mut link, 3, 2, 5, Duration::from_secs(1)).expect("latency");
+        let s = drive_latency(&mut link, 3, 2, 5, None, Duration::from_secs(1)).expect("latency");
         assert_eq!(s.latency, vec![700; 5], "the slowest of three probes");
         assert_eq!(s.handoff, vec![750; 5]);
         assert_eq!(s.fill, vec![7; 5]);
         assert_eq!(link.sent.last(), Some(&STOP));
+    }
+
+    #[test]
+    fn paced_latency_sends_one_message_per_slot() {
+        let mut link = loopback(1);
+        let period = Duration::from_millis(2);
+        let s =
+            drive_latency(&mut link, 1, 1, 4, Some(period), Duration::from_secs(1)).expect("paced");
+        assert_eq!(s.latency.len(), 4);
+        // Five messages in five different slots: at least four boundaries between the first
+        // and the last (sleeping never ends early, so this holds on any machine).
+        let sends = &link.sent_at[..5];
+        assert!(
+            sends[4] - sends[0] > period * 3,
+            "five sends within {:?}",
+            sends[4] - sends[0]
+        );
     }
 
     #[test]

@@ -1,8 +1,8 @@
 //! The quick configuration end to end: real probe processes on every transport. Checks the
-//! report's structure and that every number is positive and finite (no timing assertions), and
-//! that no node of the run is left behind.
+//! report's structure and that every number is positive and finite (no timing assertions), that
+//! the pipe wake-up floor's rows reach the JSON, and that no node of the run is left behind.
 
-use mole_bench::{IpcBenchConfig, Summary, Transport, WakeMode, run_ipc_bench};
+use mole_bench::{IpcBenchConfig, Placement, Summary, Transport, WakeMode, run_ipc_bench};
 use std::path::PathBuf;
 
 fn check(s: &Summary, what: &str) {
@@ -63,6 +63,41 @@ fn quick_run_reports_every_point() {
             .iter()
             .any(|c| c.transport == Transport::Raw && c.rate_hz == Some(100.0))
     );
+    // The floor: same CPU and other CPU, each flat out and paced, pinned or saying why not.
+    let floors: Vec<(Placement, Option<f64>)> = report
+        .floor
+        .iter()
+        .map(|f| (f.placement, f.rate_hz))
+        .collect();
+    assert_eq!(
+        floors,
+        [
+            (Placement::Same, None),
+            (Placement::Same, Some(100.0)),
+            (Placement::Other, None),
+            (Placement::Other, Some(100.0)),
+        ]
+    );
+    for f in &report.floor {
+        let what = format!("floor {:?} {:?}", f.placement, f.rate_hz);
+        assert_eq!(f.transport, Transport::Pipe);
+        let n = match f.rate_hz {
+            None => config.floor_samples,
+            Some(_) => config.floor_paced_samples,
+        };
+        assert_eq!(f.latency.count, n, "{what}");
+        check(&f.latency, &what);
+        match (f.cpus, &f.unpinned) {
+            (Some([a, b]), None) => assert_eq!(a == b, f.placement == Placement::Same, "{what}"),
+            (None, Some(why)) => assert!(!why.is_empty(), "{what}"),
+            other => panic!("{what}: pinned and unpinned at once: {other:?}"),
+        }
+    }
+    assert!(
+        report.ratios.iter().any(|r| r.what.contains("pipe floor")),
+        "{:?}",
+        report.ratios
+    );
     assert!(!report.ratios.is_empty());
     for r in &report.ratios {
         assert!(r.value.is_finite() && r.value > 0.0, "{r:?}");
@@ -71,9 +106,26 @@ fn quick_run_reports_every_point() {
     let json = serde_json::to_value(&report).expect("serialises");
     assert!(json["latency"][0]["latency"]["p50_us"].is_number());
     assert_eq!(json["latency"][0]["transport"], "runtime");
+    let floor = json["floor"]
+        .as_array()
+        .expect("the floor rows are in the JSON");
+    assert_eq!(floor.len(), 4);
+    for row in floor {
+        assert_eq!(row["transport"], "pipe");
+        assert!(row["placement"] == "same" || row["placement"] == "other");
+        assert!(row["latency"]["p50_us"].is_number() && row["latency"]["p99_us"].is_number());
+    }
+    assert_eq!(floor[1]["rate_hz"], 100.0);
+    assert!(floor[0]["rate_hz"].is_null());
     let svg = mole_bench::render_svg(&report);
     assert_eq!(svg.matches("<polyline").count(), 6);
-    assert!(mole_bench::format_table(&report).contains("five-hop"));
+    assert_eq!(
+        svg.matches("stroke-dasharray").count(),
+        2 * 4,
+        "the floor's lines"
+    );
+    let table = mole_bench::format_table(&report);
+    assert!(table.contains("five-hop") && table.contains("wake-up floor"));
 
     let left = mole_bench::live_bench_nodes(&config.namespace);
     assert!(left.is_empty(), "nodes left behind: {left:?}");
