@@ -6,6 +6,7 @@
 
 use mole_runtime::{CommonArgs, Context, SaveRequest};
 use mole_types::graph::spec;
+use mole_types::topics::WORLD_TRUTH;
 use mole_types::{GRAPH, env};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -45,7 +46,7 @@ impl Keeper {
             .name("keeper".into())
             .spawn(move || {
                 let keeper = Context::with_shutdown_flag(KEEPER_NODE, &common, flag)
-                    .and_then(|ctx| mole_runtime::Keeper::new(ctx, &topics));
+                    .and_then(|ctx| mole_runtime::Keeper::new(ctx, &topics, WORLD_TRUTH.name));
                 match keeper {
                     Ok(keeper) => {
                         let _ = ready_tx.send(Ok(()));
