@@ -47,6 +47,17 @@ pub const LAUNCHER_NODE: &str = "launcher";
 /// restart (removed at the end of the run).
 const RESUME_DIR: &str = "resume";
 
+/// A command-line value that is one of `names`, listed in `--help` and in the error for any
+/// other (the names come from the kind's one declaration, `mole_types::kinds`).
+fn choices<T: Clone + Send + Sync + 'static, E: std::fmt::Debug + 'static>(
+    names: &'static [&'static str],
+    parse: fn(&str) -> Result<T, E>,
+) -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(names)
+        .map(move |name| parse(&name).expect("a name from the kind's own list parses"))
+}
+
 #[derive(Debug, Clone, Args)]
 pub struct UpArgs {
     /// Launch file (default: launch/stacks/default.toml).
@@ -54,15 +65,14 @@ pub struct UpArgs {
     /// Scenario file, instead of the launch file's.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
-    /// Planner, instead of the launch file's: random-walk, apf, dwa or frontier.
-    #[arg(long)]
+    /// Planner, instead of the launch file's.
+    #[arg(long, value_parser = choices(PlannerKind::NAMES, str::parse::<PlannerKind>))]
     pub planner: Option<PlannerKind>,
-    /// Estimator, instead of the launch file's: bayes, kf, ekf, pf, ekf-slam, fastslam or
-    /// graph-slam.
-    #[arg(long)]
+    /// Estimator, instead of the launch file's.
+    #[arg(long, value_parser = choices(EstimatorKind::NAMES, str::parse::<EstimatorKind>))]
     pub estimator: Option<EstimatorKind>,
-    /// Clock mode: realtime or lockstep.
-    #[arg(long)]
+    /// Clock mode.
+    #[arg(long, value_parser = choices(ClockMode::NAMES, str::parse::<ClockMode>))]
     pub mode: Option<ClockMode>,
     /// Steps to run.
     #[arg(long, conflicts_with = "duration")]
