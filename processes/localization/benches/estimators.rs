@@ -52,11 +52,9 @@ struct Inputs {
 impl Inputs {
     /// The step's readings, every sensor present.
     fn readings(&self) -> Readings<'_> {
-        Readings {
-            odom: &self.odom,
-            beacons: Some(&self.beacons),
-            fix: Some(&self.fix),
-        }
+        Readings::of(&self.odom)
+            .with_beacons(Some(&self.beacons))
+            .with_fix(Some(&self.fix))
     }
 }
 

@@ -110,11 +110,8 @@ fn bench(c: &mut Criterion) {
     let mut k = 0;
     c.bench_function("ekf_step_8_of_32_known_beacons", |b| {
         b.iter(|| {
-            ekf_localiser.step(&Readings {
-                odom: &odom,
-                beacons: Some(black_box(&messages[k % STEPS])),
-                fix: None,
-            });
+            ekf_localiser
+                .step(&Readings::of(&odom).with_beacons(Some(black_box(&messages[k % STEPS]))));
             k += 1;
         })
     });

@@ -37,8 +37,11 @@ pub use slam::{EkfSlamEstimator, FastSlamEstimator};
 use thiserror::Error;
 
 /// The readings of one step: the odometry, and each correction sensor's reading when it has one
-/// of this step (`None`: no reading of that sensor this step). A new sensor is one more field.
+/// of this step (`None`: no reading of that sensor this step). Built with [`Readings::of`] and
+/// the `with_` methods, so a new sensor is one more field and one more method here, and no
+/// estimator, test or bench that does not use it changes.
 #[derive(Debug, Clone, Copy)]
+#[non_exhaustive]
 pub struct Readings<'a> {
     /// The control u_t = (v, ω) over dt that moved the robot into this step.
     pub odom: &'a Odom,
@@ -46,6 +49,27 @@ pub struct Readings<'a> {
     pub beacons: Option<&'a Beacons>,
     /// The position fix of this step (it may still say `valid == 0`: no fix).
     pub fix: Option<&'a Fix>,
+}
+
+impl<'a> Readings<'a> {
+    /// A step's odometry, with no correction reading.
+    pub fn of(odom: &'a Odom) -> Self {
+        Self {
+            odom,
+            beacons: None,
+            fix: None,
+        }
+    }
+
+    /// With the step's beacon readings, if any.
+    pub fn with_beacons(self, beacons: Option<&'a Beacons>) -> Self {
+        Self { beacons, ..self }
+    }
+
+    /// With the step's position fix, if any.
+    pub fn with_fix(self, fix: Option<&'a Fix>) -> Self {
+        Self { fix, ..self }
+    }
 }
 
 /// The odometry of a step that comes `ticks` world steps after the one handled before (a crashed

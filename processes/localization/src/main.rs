@@ -74,13 +74,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         },
         |estimator, step| {
             let odom = odometry_over_gap(step.trigger(odom), step.ticks_since_last());
-            let (beacons, fix) = (step.get(beacons), step.get(fix));
+            let readings = Readings::of(&odom).with_beacons(step.get(beacons));
             let started = now_ns();
-            estimator.step(&Readings {
-                odom: &odom,
-                beacons,
-                fix,
-            });
+            estimator.step(&readings.with_fix(step.get(fix)));
             let update_ns = now_ns().saturating_sub(started);
             if let Some(peer_map) = peer_map {
                 fusion.step(step.tick(), step.get(peer_map), estimator.as_mut());

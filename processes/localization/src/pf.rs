@@ -590,11 +590,11 @@ mod tests {
         let still: Odom = bytemuck::Zeroable::zeroed();
         for _ in 0..10 {
             pf.predict_with(0.0, 0.0, 0.01).unwrap();
-            pf.correct(&Readings {
-                odom: &still,
-                beacons: Some(&beacons),
-                fix: Some(&fix),
-            });
+            pf.correct(
+                &Readings::of(&still)
+                    .with_beacons(Some(&beacons))
+                    .with_fix(Some(&fix)),
+            );
             let s: f64 = pf.weights().iter().sum();
             assert_relative_eq!(s, 1.0, epsilon = 1e-12);
         }

@@ -96,11 +96,11 @@ fn ekf_run(seed: u64, steps: usize) -> f64 {
         sensing.odom(&truth, &mut odom);
         sensing.beacons(&truth, &mut beacons);
         sensing.fix(&truth, &mut fix);
-        ekf.step(&Readings {
-            odom: &odom,
-            beacons: Some(&beacons),
-            fix: Some(&fix),
-        });
+        ekf.step(
+            &Readings::of(&odom)
+                .with_beacons(Some(&beacons))
+                .with_fix(Some(&fix)),
+        );
         let mut e = x - ekf.mu;
         e[2] = wrap_angle(e[2]);
         let chol = ekf.sigma.cholesky().expect("Σ stays SPD");

@@ -172,11 +172,11 @@ fn run<E: Estimator>(
                     *n
                 };
                 (fix.x, fix.y, fix.std, fix.valid) = (*x, *y, *std, *valid);
-                est.correct(&Readings {
-                    odom: &odom,
-                    beacons: Some(&beacons),
-                    fix: Some(&fix),
-                });
+                est.correct(
+                    &Readings::of(&odom)
+                        .with_beacons(Some(&beacons))
+                        .with_fix(Some(&fix)),
+                );
             }
         }
         est.write_particles(&mut particles);

@@ -91,11 +91,11 @@ impl Step {
         b.n_readings += 1;
         let f = &mut self.fix;
         (f.x, f.y, f.std, f.valid) = (x, y, 0.5, u32::from(k.is_multiple_of(10)));
-        est.step(&Readings {
-            odom: &self.odom,
-            beacons: Some(&self.beacons),
-            fix: Some(&self.fix),
-        });
+        est.step(
+            &Readings::of(&self.odom)
+                .with_beacons(Some(&self.beacons))
+                .with_fix(Some(&self.fix)),
+        );
     }
 }
 

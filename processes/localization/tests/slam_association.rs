@@ -192,11 +192,7 @@ fn ekf_slam_estimator_associates_anonymous_readings() {
         let mut founders = BTreeMap::new();
         for step in simulate(STEPS, seed) {
             messages(&step, Some(LANDMARK_ANONYMOUS), &mut odom, &mut beacons);
-            est.step(&Readings {
-                odom: &odom,
-                beacons: Some(&beacons),
-                fix: None,
-            });
+            est.step(&Readings::of(&odom).with_beacons(Some(&beacons)));
             score_anonymous(&step.readings, est.decisions(), &mut founders, &mut score);
         }
         let mut out = bytemuck::zeroed_box::<mole_types::Landmarks>();
@@ -240,11 +236,7 @@ fn fastslam_estimator_associates_anonymous_readings() {
         let mut mapped = BTreeSet::new();
         for step in simulate(STEPS, seed) {
             messages(&step, Some(LANDMARK_ANONYMOUS), &mut odom, &mut beacons);
-            est.step(&Readings {
-                odom: &odom,
-                beacons: Some(&beacons),
-                fix: None,
-            });
+            est.step(&Readings::of(&odom).with_beacons(Some(&beacons)));
             twin.predict(step.v, step.omega, DT)
                 .expect("plausible control");
             for (r, d) in step.readings.iter().zip(est.decisions()) {

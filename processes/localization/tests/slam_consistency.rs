@@ -22,11 +22,7 @@ fn average_nees(steps: usize) -> Vec<f64> {
         let mut slam = EkfSlamEstimator::from_map(&world_map(seed, &landmarks()));
         for (k, step) in simulate(steps, seed).iter().enumerate() {
             messages(step, None, &mut odom, &mut beacons);
-            slam.step(&Readings {
-                odom: &odom,
-                beacons: Some(&beacons),
-                fix: None,
-            });
+            slam.step(&Readings::of(&odom).with_beacons(Some(&beacons)));
             let e = pose_error(slam.pose(), &step.truth);
             let p = Matrix3::from_row_slice(&slam.covariance());
             let nees = e.dot(&(p.try_inverse().expect("Σₓₓ is invertible") * e));

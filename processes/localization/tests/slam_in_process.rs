@@ -39,11 +39,11 @@ fn drive(est: &mut dyn Estimator, steps: usize, seed: u64) {
         messages(step, None, &mut odom, &mut beacons);
         (fix.x, fix.y, fix.std) = (step.truth[0], step.truth[1], 0.5);
         fix.valid = u32::from(k % 50 == 49);
-        est.step(&Readings {
-            odom: &odom,
-            beacons: Some(&beacons),
-            fix: Some(&fix),
-        });
+        est.step(
+            &Readings::of(&odom)
+                .with_beacons(Some(&beacons))
+                .with_fix(Some(&fix)),
+        );
     }
 }
 
@@ -218,11 +218,7 @@ fn a_fix_pulls_every_slam_estimator_toward_it() {
         (fix.x, fix.y, fix.std) = (before.x, before.y + 0.3, 0.1);
         for valid in [0, 1] {
             fix.valid = valid;
-            est.correct(&Readings {
-                odom: &odom,
-                beacons: None,
-                fix: Some(&fix),
-            });
+            est.correct(&Readings::of(&odom).with_fix(Some(&fix)));
             if valid == 0 {
                 assert_eq!(
                     est.pose(),

@@ -125,11 +125,11 @@ fn corridor_belief_concentrates_on_the_true_cell() {
             range: dx.hypot(dy) + 0.05 * g(),
             bearing: wrap_angle(dy.atan2(dx) - theta + 0.02 * g()),
         };
-        f.step(&Readings {
-            odom: &odom,
-            beacons: Some(&beacons),
-            fix: Some(&no_fix()),
-        });
+        f.step(
+            &Readings::of(&odom)
+                .with_beacons(Some(&beacons))
+                .with_fix(Some(&no_fix())),
+        );
         assert!((sum(&f) - 1.0).abs() < 1e-9, "Σ Bel = {}", sum(&f));
     }
     let (ix, iy, k) = f.argmax();

@@ -18,11 +18,11 @@ const BEACONS: [(f64, f64, u32); 4] = [
 /// The correction with this step's beacon readings and fix (both present), without a move.
 fn correct(ekf: &mut Ekf, beacons: &Beacons, fix: &Fix) {
     let still: Odom = bytemuck::Zeroable::zeroed();
-    ekf.correct(&Readings {
-        odom: &still,
-        beacons: Some(beacons),
-        fix: Some(fix),
-    });
+    ekf.correct(
+        &Readings::of(&still)
+            .with_beacons(Some(beacons))
+            .with_fix(Some(fix)),
+    );
 }
 
 fn sites() -> Vec<BeaconSite> {
@@ -385,11 +385,11 @@ fn simulate(seed: u64, ticks: usize) -> RunStats {
         fix.std = s.fix_std;
         readings += fix.valid as u64;
 
-        ekf.step(&Readings {
-            odom: &odom,
-            beacons: Some(&beacons),
-            fix: Some(&fix),
-        });
+        ekf.step(
+            &Readings::of(&odom)
+                .with_beacons(Some(&beacons))
+                .with_fix(Some(&fix)),
+        );
 
         let mut e = truth - ekf.mu;
         e[2] = wrap_angle(e[2]);

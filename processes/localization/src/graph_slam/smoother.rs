@@ -563,11 +563,7 @@ mod tests {
         let ticks: Vec<u64> = (40..=290).filter(|&t| t != 100).collect();
         for &tick in &ticks {
             odom.header.tick = tick;
-            graph.step(&Readings {
-                odom: &odom,
-                beacons: None,
-                fix: None,
-            });
+            graph.step(&Readings::of(&odom));
         }
         graph.settle();
         assert!(graph.smoother_solves() > 0);

@@ -69,11 +69,11 @@ pub fn compare(particles: usize, seeds: u64, steps: usize) -> Row {
             fix.x = tx + sf * g();
             fix.y = ty + sf * g();
             fix.std = sf;
-            pf.step(&Readings {
-                odom: &odom,
-                beacons: Some(&beacons),
-                fix: Some(&fix),
-            });
+            pf.step(
+                &Readings::of(&odom)
+                    .with_beacons(Some(&beacons))
+                    .with_fix(Some(&fix)),
+            );
             kf.predict(&Vector1::new(v)).expect("finite");
             kf.correct(&Vector2::new(fix.x, fix.y), None)
                 .expect("finite");
