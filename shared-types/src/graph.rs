@@ -157,6 +157,7 @@ pub const GRAPH: &[RoleSpec] = &[
             WORLD_TRUTH.name,
             LOCALIZATION_POSE.name,
             LOCALIZATION_PARTICLES.name,
+            LOCALIZATION_LANDMARKS.name,
             LOCALIZATION_TRAJECTORY.name,
             MAPPING_GRID.name,
             MAPPING_CONTACT.name,
