@@ -79,6 +79,7 @@ pub fn cleanup_dead_nodes() -> usize {
     let half_made = half_made_segments
         + remove_half_made_nodes(&nodes_dir, &config.global.prefix, &listed)
         + remove_half_made_services(config)
+        + remove_orphaned_services(config)
         + remove_orphaned_port_segments(config);
     if half_made > 0 {
         tracing::info!(
@@ -271,6 +272,79 @@ fn remove_half_made_services(config: &Config) -> usize {
     half_made.len()
 }
 
+/// The part of a service's static config that names its dynamic config.
+#[derive(serde::Deserialize)]
+struct StaticConfig {
+    unique_service_id: UniqueServiceId,
+}
+
+#[derive(serde::Deserialize)]
+struct UniqueServiceId {
+    payload_value: u64,
+    unique_value: u64,
+}
+
+/// The id in the name of the dynamic config of the service whose static config is `text`.
+fn dynamic_config_id(text: &str) -> Option<u128> {
+    let id = toml::from_str::<StaticConfig>(text).ok()?.unique_service_id;
+    Some((u128::from(id.unique_value) << 64) | u128::from(id.payload_value))
+}
+
+/// Removes the services that no node uses (no node holds a tag of them), once old enough: their
+/// static config and its dynamic config. A node tags a service after creating it, and iceoryx2
+/// removes a service when it cleans the last node that tagged it, so it leaves those of a
+/// process killed after creating the service but before tagging it. Returns how many were
+/// removed.
+fn remove_orphaned_services(config: &Config) -> usize {
+    let global = &config.global;
+    let prefix = String::from_utf8_lossy(global.prefix.as_bytes()).into_owned();
+    let tag = String::from_utf8_lossy(global.node.service_tag_suffix.as_bytes()).into_owned();
+    let tagged: HashSet<String> = entries(&std_path(&global.node_dir()))
+        .iter()
+        .flat_map(|node| entries(node))
+        .filter_map(|p| {
+            let name = p.file_name()?.to_str()?;
+            Some(name.strip_prefix(&prefix)?.strip_suffix(&tag)?.to_owned())
+        })
+        .collect();
+    let suffix = String::from_utf8_lossy(global.service.static_config_storage_suffix.as_bytes());
+    let dynamic = String::from_utf8_lossy(global.service.dynamic_config_storage_suffix.as_bytes());
+    let mut removed = 0;
+    for path in entries(&std_path(&global.service_dir())) {
+        let Some(hash) = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .and_then(|n| n.strip_prefix(&prefix)?.strip_suffix(suffix.as_ref()))
+        else {
+            continue;
+        };
+        if tagged.contains(hash)
+            || is_unsealed(&path)
+            || !all_older_than(std::slice::from_ref(&path), HALF_MADE_AGE)
+        {
+            continue;
+        }
+        let Some(id) = std::fs::read_to_string(&path)
+            .ok()
+            .and_then(|text| dynamic_config_id(&text))
+        else {
+            continue;
+        };
+        let ending = format!("_{id}{dynamic}");
+        entries(Path::new(SHARED_MEMORY_DIR))
+            .iter()
+            .filter(|p| {
+                p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with(&prefix) && n.ends_with(&ending))
+            })
+            .for_each(|p| remove(p));
+        remove(&path);
+        removed += 1;
+    }
+    removed
+}
+
 /// The monitor files (`<prefix><id>.node_monitor…`) of node `id`.
 fn monitor_files(nodes_dir: &Path, prefix: &FileName, id: u128) -> Vec<PathBuf> {
     let start = format!("{}{id}.", String::from_utf8_lossy(prefix.as_bytes()));
@@ -379,7 +453,22 @@ pub fn list_topics(namespace: &str) -> Vec<(String, String)> {
 
 #[cfg(test)]
 mod tests {
-    use super::segment_port_ids;
+    use super::{dynamic_config_id, segment_port_ids};
+
+    /// A service's static config (as iceoryx2 0.10 writes it) names its dynamic config: the
+    /// one a killed creator left beside it in a CI run.
+    #[test]
+    fn the_dynamic_config_is_found_from_the_static_one() {
+        let text = "service_hash = \"15371ab1d2fb57328b41846c542104409503b822\"\n\
+                    service_name = \"mole/t/planning/status\"\nattributes = []\n\n\
+                    [unique_service_id]\npayload_value = 2228098028072363687\n\
+                    unique_value = 68719504931\n";
+        assert_eq!(
+            dynamic_config_id(text),
+            Some(1267651120336406657765583382183)
+        );
+        assert_eq!(dynamic_config_id("not a static config"), None);
+    }
 
     #[test]
     fn port_ids_are_read_from_segment_names_and_the_service_hash_is_not_one() {
