@@ -566,8 +566,7 @@ impl<M: MotionModel> EkfSlam<M> {
     pub fn fuse_landmarks(&mut self, other: &[Landmark]) -> FuseReport {
         let mut report = FuseReport::default();
         for lm in other {
-            let usable = lm.mean.iter().chain(lm.cov.iter()).all(|v| v.is_finite())
-                && Cholesky::new(lm.cov).is_some();
+            let usable = lm.is_usable();
             let slot = (0..self.n).find(|&s| self.ids[s] == lm.id);
             match (usable, slot) {
                 (false, _) => report.refused += 1,
@@ -589,13 +588,7 @@ impl<M: MotionModel> EkfSlam<M> {
     /// and every other landmark, and returns its slot; refused when it is not finite and
     /// positive definite or the map is full. Its id is not matched against the map's.
     pub fn insert_landmark(&mut self, landmark: &Landmark) -> Result<usize, SlamError> {
-        let usable = landmark
-            .mean
-            .iter()
-            .chain(landmark.cov.iter())
-            .all(|v| v.is_finite())
-            && Cholesky::new(landmark.cov).is_some();
-        if !usable {
+        if !landmark.is_usable() {
             return Err(SlamError::Invalid);
         }
         if self.n == self.capacity() {

@@ -293,13 +293,7 @@ impl FastSlam {
     /// when it is not finite and positive definite, or a particle's map is full. Meant for a
     /// filter that starts from another estimator's map (every particle has the same landmarks).
     pub fn insert_landmark(&mut self, landmark: &Landmark) -> Result<usize, SlamError> {
-        let usable = landmark
-            .mean
-            .iter()
-            .chain(landmark.cov.iter())
-            .all(|v| v.is_finite())
-            && Cholesky::new(landmark.cov).is_some();
-        if !usable {
+        if !landmark.is_usable() {
             return Err(SlamError::Invalid);
         }
         let slot = self.set.count[0];

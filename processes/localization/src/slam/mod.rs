@@ -128,6 +128,17 @@ pub struct Landmark {
     pub cov: Matrix2<f64>,
 }
 
+impl Landmark {
+    /// Whether it can enter a map: finite, with a positive definite covariance.
+    pub fn is_usable(&self) -> bool {
+        self.mean
+            .iter()
+            .chain(self.cov.iter())
+            .all(|v| v.is_finite())
+            && nalgebra::Cholesky::new(self.cov).is_some()
+    }
+}
+
 /// What became of one reading.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Association {
