@@ -3,6 +3,8 @@
 //! its publisher wait. The peer's input never gates a step, and a reader that does not step
 //! never holds the peer back.
 
+mod common;
+
 use mole_runtime::{ClockMode, CommonArgs, Context, Order, Process, Publisher, RuntimeError};
 use mole_types::{Odom, Topic, WorldMap, topics};
 use std::sync::Arc;
@@ -78,20 +80,11 @@ impl StackB {
             _ctx: ctx,
         }
     }
-    /// The world's map, once robot B's process listens.
     fn map(&mut self) {
-        std::thread::sleep(Duration::from_millis(200));
-        self.map
-            .publish(0, 1, |m| {
-                (m.arena_width, m.arena_height, m.dt) = (1.0, 1.0, 0.01);
-                (m.grid_resolution, m.robot.radius) = (0.1, 0.1);
-            })
-            .unwrap();
+        common::publish_map(&mut self.map);
     }
     fn odom(&mut self, k: u64) {
-        self.odom
-            .publish(k, 1, |m| (m.v, m.omega, m.dt) = (0.0, 0.0, 0.01))
-            .unwrap();
+        common::publish_odom(&mut self.odom, k);
     }
 }
 

@@ -1,6 +1,8 @@
 //! The step loop's rules against real iceoryx2 queues: which sample of each input a step gets,
 //! in lockstep and in realtime, when inputs come early, late or not at all.
 
+mod common;
+
 use mole_runtime::{ClockMode, CommonArgs, Context, In, Order, Process, Publisher, Rule};
 use mole_types::{Fix, Grid, Odom, Scan, topics};
 use std::sync::Arc;
@@ -81,20 +83,11 @@ impl Feed {
             _ctx: ctx,
         }
     }
-    /// The world's map, once the process listens (it subscribes as it starts its loop).
     fn map(&mut self) {
-        std::thread::sleep(Duration::from_millis(200));
-        self.map
-            .publish(0, 1, |m| {
-                (m.arena_width, m.arena_height, m.dt) = (1.0, 1.0, 0.01);
-                (m.grid_resolution, m.robot.radius) = (0.1, 0.1);
-            })
-            .unwrap();
+        common::publish_map(&mut self.map);
     }
     fn odom(&mut self, k: u64) {
-        self.odom
-            .publish(k, 1, |m| (m.v, m.omega, m.dt) = (0.0, 0.0, 0.01))
-            .unwrap();
+        common::publish_odom(&mut self.odom, k);
     }
     fn fix(&mut self, k: u64) {
         self.fix.publish(k, 1, |m| m.std = 0.1).unwrap();
