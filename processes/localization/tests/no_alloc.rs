@@ -175,7 +175,7 @@ fn graph_slam_steps_that_take_a_solution_over_do_not_allocate() {
 }
 
 /// Fusing a peer robot's landmark map into EKF-SLAM (a `PeerFusion` round: its landmarks fused
-/// by CI and one it lacks added) allocates nothing either.
+/// by CI and one it lacks left unmapped) allocates nothing either.
 #[test]
 fn a_peer_fusion_round_does_not_allocate() {
     use mole_localization::slam::PeerFusion;
@@ -210,7 +210,7 @@ fn a_peer_fusion_round_does_not_allocate() {
     });
     let report = report.expect("a round with a new map");
     assert_eq!(
-        (report.fused + report.kept, report.added),
+        (report.fused + report.kept, report.unmapped),
         (n, 1),
         "{report:?}"
     );

@@ -94,8 +94,8 @@ pub struct FusionTotals {
     pub fused: u64,
     /// Landmarks both maps had that CI left as they were (ω = 1).
     pub kept: u64,
-    /// Landmarks only the peer had, added.
-    pub added: u64,
+    /// Landmarks only the peer had, left for this robot to map.
+    pub unmapped: u64,
     /// Peer landmarks refused: not finite, not positive definite, or beyond the capacity.
     pub refused: u64,
 }
@@ -141,7 +141,7 @@ impl PeerFusion {
         self.totals.rounds += 1;
         self.totals.fused += report.fused as u64;
         self.totals.kept += report.kept as u64;
-        self.totals.added += report.added as u64;
+        self.totals.unmapped += report.unmapped as u64;
         self.totals.refused += report.refused as u64;
         Some(report)
     }
@@ -159,7 +159,7 @@ impl PeerFusion {
             rounds = t.rounds,
             fused = t.fused,
             kept = t.kept,
-            added = t.added,
+            unmapped = t.unmapped,
             refused = t.refused,
             "peer fusion totals"
         );
@@ -214,8 +214,9 @@ mod tests {
         }
     }
 
-    /// Rounds come every `every` steps and fuse only a map not fused before: the first adds
-    /// the peer's landmarks, a repeat of the same map is skipped, a new one fuses them.
+    /// Rounds come every `every` steps and fuse only a map not fused before: a repeat of the
+    /// same map is skipped, a new one is a round. (This robot has mapped nothing yet, so every
+    /// peer landmark is left unmapped; the fusion itself is tested in tests/slam_ci.rs.)
     #[test]
     fn a_round_every_n_steps_fuses_only_a_new_map() {
         let mut map = zeroed_map();
@@ -224,9 +225,9 @@ mod tests {
         let mut fusion = PeerFusion::new(10);
         let first = peer_map(3, 1);
         assert_eq!(fusion.step(9, Some(&first), est.as_mut()), None, "not due");
-        let added = fusion.step(10, Some(&first), est.as_mut()).expect("due");
+        let report = fusion.step(10, Some(&first), est.as_mut()).expect("due");
         assert_eq!(
-            (added.fused + added.kept, added.added, added.refused),
+            (report.fused + report.kept, report.unmapped, report.refused),
             (0, 3, 0)
         );
         assert_eq!(fusion.step(15, Some(&first), est.as_mut()), None, "not due");
@@ -239,9 +240,8 @@ mod tests {
         let second = fusion
             .step(40, Some(&peer_map(4, 2)), est.as_mut())
             .unwrap();
-        assert_eq!((second.fused + second.kept, second.added), (3, 1));
+        assert_eq!((second.fused + second.kept, second.unmapped), (0, 4));
         let totals = fusion.totals();
-        assert_eq!((totals.rounds, totals.added, totals.refused), (2, 4, 0));
-        assert_eq!(totals.fused + totals.kept, 3);
+        assert_eq!((totals.rounds, totals.unmapped, totals.refused), (2, 7, 0));
     }
 }

@@ -58,10 +58,24 @@ pub fn simulate(steps: usize, seed: u64) -> Vec<Step> {
 /// `steps` steps from the start (0, 0, 0): the truth moves by g with the true control, the
 /// odometry reports it with N(0, M_t) noise, the readings carry N(0, Q_t) noise.
 pub fn simulate_with(steps: usize, seed: u64, noise: &NoiseModel) -> Vec<Step> {
+    simulate_with_from(steps, seed, noise, (0.0, 0.0, 0.0))
+}
+
+/// `steps` steps with [`noise`] from `start` (x, y, θ) instead of the origin.
+pub fn simulate_from(steps: usize, seed: u64, start: (f64, f64, f64)) -> Vec<Step> {
+    simulate_with_from(steps, seed, &noise(), start)
+}
+
+fn simulate_with_from(
+    steps: usize,
+    seed: u64,
+    noise: &NoiseModel,
+    start: (f64, f64, f64),
+) -> Vec<Step> {
     let lms = landmarks();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut gauss = move || -> f64 { rng.sample(StandardNormal) };
-    let mut truth = Vector3::zeros();
+    let mut truth = Vector3::new(start.0, start.1, start.2);
     (0..steps)
         .map(|_| {
             truth = unicycle_g(&truth, V, OMEGA, DT);
