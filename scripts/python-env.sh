@@ -1,16 +1,19 @@
 #!/usr/bin/env bash
 # Creates target/python-env, a Python virtual environment with the iceoryx2 package that
 # examples/python_planner needs (tests/python.rs uses it when it is there), at the version the
-# Rust side is built against (Cargo.lock): iceoryx2 services refuse another version.
+# Rust side is built against (Cargo.lock): iceoryx2 services refuse another version; and the mcap
+# package, an MCAP implementation independent of the Rust crate, that tests/record.rs reads
+# recordings with.
 # Usage: scripts/python-env.sh
-# Idempotent: an environment that already has the right iceoryx2 is left as it is. It never
-# fails: without python3, venv or the package registry it says why in one line and exits 0, and
-# the Python test is then skipped with that reason.
+# Idempotent: an environment that already has both packages is left as it is. It never fails:
+# without python3, venv or the package registry it says why in one line and exits 0, and the
+# Python tests are then skipped with that reason.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 
 version="$(sed -n '/^name = "iceoryx2"$/{n;s/^version = "\(.*\)"$/\1/p;}' Cargo.lock 2>/dev/null)"
 env_dir="target/python-env"
+mcap_version="1.6.0"
 python="$env_dir/bin/python3"
 log="$env_dir/pip.log"
 
@@ -19,11 +22,16 @@ has_iceoryx2() {
 sys.exit(m.version('iceoryx2') != '$version')" >/dev/null 2>&1
 }
 
+has_mcap() {
+    "$python" -c "import sys, importlib.metadata as m, mcap.reader, lz4
+sys.exit(m.version('mcap') != '$mcap_version')" >/dev/null 2>&1
+}
+
 if [ -z "$version" ]; then
     echo "python-env: Cargo.lock names no iceoryx2 version, so no $env_dir"
     exit 0
 fi
-if [ -x "$python" ] && has_iceoryx2; then
+if [ -x "$python" ] && has_iceoryx2 && has_mcap; then
     exit 0
 fi
 if ! command -v python3 >/dev/null 2>&1; then
@@ -36,12 +44,16 @@ if [ ! -x "$python" ] && ! python3 -m venv "$env_dir" >/dev/null 2>&1; then
     exit 0
 fi
 if ! "$python" -m pip install --disable-pip-version-check --timeout 30 --retries 2 \
-    "iceoryx2==$version" >"$log" 2>&1; then
-    echo "python-env: pip could not install iceoryx2==$version (no network or no wheel for this platform; see $log)"
+    "iceoryx2==$version" "mcap==$mcap_version" >"$log" 2>&1; then
+    echo "python-env: pip could not install iceoryx2==$version and mcap==$mcap_version (no network or no wheel for this platform; see $log)"
     exit 0
 fi
 if ! has_iceoryx2; then
     echo "python-env: iceoryx2==$version installed but does not import (see $log)"
     exit 0
 fi
-echo "python-env: iceoryx2 $version ready in $env_dir"
+if ! has_mcap; then
+    echo "python-env: mcap==$mcap_version installed but does not import (see $log)"
+    exit 0
+fi
+echo "python-env: iceoryx2 $version and mcap $mcap_version ready in $env_dir"

@@ -14,6 +14,7 @@ pub mod hot_swap;
 pub mod keeper;
 pub mod launch_file;
 pub mod order;
+pub mod record;
 pub mod stats;
 pub mod supervisor;
 pub mod swap;

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
 use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
 use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
+use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::top::{TopArgs, top};
 use mole_launch::up::{UpArgs, up};
 use std::process::ExitCode;
@@ -32,6 +33,10 @@ enum Command {
     Status(NamespaceArgs),
     /// Watch a running stack: each topic's rate, latency, drops; each process's state and CPU.
     Top(TopArgs),
+    /// Record every topic of a running stack into an MCAP file, until Ctrl-C or the stack ends.
+    Record(RecordArgs),
+    /// Describe a recording: duration, ticks, topics with counts and rates, metadata.
+    Info(InfoArgs),
     /// Measure latency and throughput.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -55,6 +60,8 @@ fn main() -> ExitCode {
         Command::Stop(args) => stop(&args),
         Command::Status(args) => status(&args),
         Command::Top(args) => top(&args),
+        Command::Record(args) => record(&args),
+        Command::Info(args) => info(&args),
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
         Command::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),
     };

@@ -7,6 +7,7 @@ mod prepare;
 
 use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
 use crate::keeper::Keeper;
+use crate::record::{RecordPlan, Recorder};
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::{
@@ -101,6 +102,13 @@ pub struct UpArgs {
     /// No progress bar (logs only).
     #[arg(long)]
     pub quiet: bool,
+    /// Record every topic of the run into this MCAP file (`mole info FILE` describes it).
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
+    /// With --record: write TOPIC's samples every N ticks only (repeatable; default
+    /// mapping/grid=10 and mapping/contact=10; N = 1 writes every sample).
+    #[arg(long = "record-every", value_name = "TOPIC=N", requires = "record")]
+    pub record_every: Vec<String>,
 }
 
 /// A failure of `mole up`, with the exit code it deserves.
@@ -215,7 +223,15 @@ pub struct RunOutcome {
 /// Runs the stack to its end (or Ctrl-C); the summary is in `args.out`.
 pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
     let plan = prepare(args)?;
-    let mut stack = start(args, plan)?;
+    let recording = match &args.record {
+        Some(file) => Some(RecordPlan::new(
+            file,
+            &args.record_every,
+            &plan.launch.path,
+        )?),
+        None => None,
+    };
+    let mut stack = start(args, plan, recording)?;
     let end = supervise(&mut stack);
     finish(stack, end)
 }
@@ -277,14 +293,17 @@ struct Stack<'a> {
     /// Declared after `supervisor`'s users are done with it: see [`finish`].
     keeper: Keeper,
     supervisor: Supervisor,
+    /// `--record`: the recorder beside the stack.
+    recorder: Option<Recorder>,
     watch: Watch,
     interrupted: Arc<AtomicBool>,
     progress: ProgressBar,
     started: Instant,
 }
 
-/// Opens the launcher's ports and starts every process once those it depends on are ready.
-fn start(args: &UpArgs, plan: Plan) -> Result<Stack<'_>, Failure> {
+/// Opens the launcher's ports, starts the recorder (if any) and every process once those it
+/// depends on are ready.
+fn start(args: &UpArgs, plan: Plan, recording: Option<RecordPlan>) -> Result<Stack<'_>, Failure> {
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
@@ -292,12 +311,16 @@ fn start(args: &UpArgs, plan: Plan) -> Result<Stack<'_>, Failure> {
     let common = common_args(args, &plan);
     let ports = open_ports(&common, interrupted.clone()).map_err(Failure::run)?;
     let keeper = Keeper::start(&common, args.out.join(RESUME_DIR)).map_err(Failure::run)?;
+    let recorder = recording
+        .map(|r| r.start(&plan.env, log_of(args, "recorder")))
+        .transpose()?;
     let order = start_order(&plan.launch.processes).map_err(|e| Failure::input(e.to_string()))?;
     let mut stack = Stack {
         args,
         ports,
         keeper,
         supervisor: Supervisor::new(),
+        recorder,
         watch: Watch::new(),
         interrupted,
         progress: progress_bar(plan.ticks, args.quiet),
@@ -375,6 +398,9 @@ fn supervise(stack: &mut Stack<'_>) -> RunEnd {
             return end;
         }
         restart_hung(stack);
+        if let Some(recorder) = stack.recorder.as_mut() {
+            recorder.check();
+        }
         if last_report.elapsed() >= Duration::from_secs(1) {
             last_report = Instant::now();
             publish_processes(stack);
@@ -647,6 +673,7 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         ports,
         keeper,
         mut supervisor,
+        recorder,
         watch,
         progress,
         started,
@@ -661,6 +688,10 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
     let killed = supervisor.shutdown(&stopping, timeout);
     if !killed.is_empty() {
         tracing::warn!(?killed, "needed SIGKILL");
+    }
+    // After every role: the recorder reads their last samples before it finishes its file.
+    if let Some(recorder) = recorder {
+        recorder.stop(timeout);
     }
     drop(ports);
     keeper.stop();
@@ -915,7 +946,7 @@ fn hung_roles(
 }
 
 /// The last `error:` line of a process log (or where the log is).
-fn last_error_line(log: &Path) -> String {
+pub(crate) fn last_error_line(log: &Path) -> String {
     std::fs::read_to_string(log)
         .ok()
         .and_then(|text| {

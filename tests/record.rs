@@ -1,0 +1,506 @@
+//! Recording, as a user runs it: `mole up --record FILE` does not change the run, `mole info`
+//! describes the file, a recorder killed mid-run leaves every complete chunk readable, restarts
+//! are in the file, and an independent MCAP implementation (the `mcap` package from PyPI)
+//! decodes a message with the schema's field table alone.
+
+use mole_integration_tests::*;
+use mole_types::{Role, Truth, topics};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+const RUN_TIMEOUT: Duration = Duration::from_secs(240);
+
+/// A finished run: its summary, its recording (if any, read whole), logs and output.
+struct Run {
+    output: Output,
+    logs: String,
+    summary: Option<Summary>,
+    recording: Option<Vec<u8>>,
+}
+
+/// The recording's name in a run's output directory (removed with it, whatever happens).
+const RECORDING: &str = "run.mcap";
+
+/// Starts `mole up` with `args`, recording into its output directory when `record`.
+fn start(test: &str, args: &[&str], record: bool) -> Stack {
+    if !record {
+        return Stack::start(test, args);
+    }
+    let namespace = unique_namespace(test);
+    // Where `Stack::start_in` puts the output directory.
+    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+    let file = out.join(RECORDING).display().to_string();
+    let args: Vec<&str> = args.iter().copied().chain(["--record", &file]).collect();
+    let stack = Stack::start_in(&namespace, &args);
+    assert_eq!(stack.out, out);
+    stack
+}
+
+/// Where a stack started by [`start`] records.
+fn recording_of(stack: &Stack) -> PathBuf {
+    stack.out.join(RECORDING)
+}
+
+/// Waits for the run to end and keeps what it left.
+fn finish(stack: Stack) -> Run {
+    let namespace = stack.namespace.clone();
+    let keep = stack.out.with_extension("kept");
+    let _ = std::fs::remove_dir_all(&keep);
+    let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
+    let logs = logs(&keep);
+    let summary = keep.join("summary.json").exists().then(|| summary(&keep));
+    let recording = std::fs::read(keep.join(RECORDING)).ok();
+    let _ = std::fs::remove_dir_all(&keep);
+    assert!(
+        processes_of(&namespace).is_empty(),
+        "processes left behind\n{logs}"
+    );
+    Run {
+        output,
+        logs,
+        summary,
+        recording,
+    }
+}
+
+/// A lockstep run of `ticks` steps with `seed`, recorded or not, that must succeed.
+fn lockstep_run(test: &str, ticks: u64, seed: u64, record: bool) -> Run {
+    let (ticks, seed) = (ticks.to_string(), seed.to_string());
+    let args = ["--mode", "lockstep", "--ticks", &ticks, "--seed", &seed];
+    let run = finish(start(test, &args, record));
+    assert!(
+        run.output.status.success(),
+        "mole up failed: {}\n{}",
+        String::from_utf8_lossy(&run.output.stderr),
+        run.logs
+    );
+    run
+}
+
+/// A lockstep summary without what differs from run to run (wall time, latencies, wall-clock
+/// rates): what the scenario and seed alone decide.
+fn deterministic(summary: &Summary) -> Summary {
+    Summary {
+        wall_time_s: 0.0,
+        launcher_wall_time_s: None,
+        loop_latency_us: Default::default(),
+        estimator_update_us: Default::default(),
+        topics: Default::default(),
+        ..summary.clone()
+    }
+}
+
+/// Every message a streaming reader gets from `bytes` before the first error, as (topic,
+/// log time, payload).
+fn stream(bytes: &[u8]) -> Vec<(String, u64, Vec<u8>)> {
+    mcap::MessageStream::new(bytes)
+        .expect("an MCAP file")
+        .map_while(Result::ok)
+        .map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned()))
+        .collect()
+}
+
+/// The truths of a recording, in file order.
+fn truths(bytes: &[u8]) -> Vec<(u64, Truth)> {
+    stream(bytes)
+        .into_iter()
+        .filter(|(topic, _, _)| topic == topics::WORLD_TRUTH.name)
+        .map(|(_, time, data)| (time, bytemuck::pod_read_unaligned::<Truth>(&data)))
+        .collect()
+}
+
+/// Waits for `child`; kills it and fails after `timeout` (it would hang otherwise).
+fn wait_or_kill(mut child: std::process::Child, timeout: Duration) -> Output {
+    let deadline = Instant::now() + timeout;
+    while child.try_wait().ok().flatten().is_none() {
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let output = child.wait_with_output().expect("reap");
+            panic!(
+                "still running after {timeout:?}: {}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.wait_with_output().expect("collect output")
+}
+
+/// Writes `bytes` to a file of the test's own and runs `mole info` on it.
+fn mole_info(name: &str, bytes: &[u8]) -> Output {
+    let path = std::env::temp_dir().join(format!("mole-info-{name}-{}.mcap", std::process::id()));
+    std::fs::write(&path, bytes).expect("write the recording");
+    let output = run_mole(&["info", &path.display().to_string()]);
+    let _ = std::fs::remove_file(&path);
+    output
+}
+
+/// Recording never changes the run: a recorded lockstep run has the summary, the grid hashes
+/// and every seed-decided value of an unrecorded one.
+#[test]
+fn a_recorded_lockstep_run_is_the_run_an_unrecorded_one_is() {
+    let _serial = serial();
+    let before = shm_files();
+    let plain = lockstep_run("plain", 1000, 5, false);
+    let recorded = lockstep_run("recorded", 1000, 5, true);
+    let (plain, recorded_summary) = (
+        plain.summary.expect("a summary"),
+        recorded.summary.expect("a summary"),
+    );
+    assert!(plain.grid_hash.is_some());
+    assert_eq!(plain.grid_hash, recorded_summary.grid_hash);
+    assert_eq!(plain.contact_hash, recorded_summary.contact_hash);
+    assert_eq!(deterministic(&plain), deterministic(&recorded_summary));
+    let recording = recorded.recording.expect("a recording");
+    assert_eq!(
+        truths(&recording).len() as u64,
+        recorded_summary.ticks + 1,
+        "every step is recorded"
+    );
+    assert_eq!(left_behind(&before), Vec::<String>::new());
+}
+
+/// `mole info` lists every topic with plausible counts: one truth a tick, one map, a grid every
+/// ten ticks and the last one; and refuses a truncated file or one that is not MCAP, with
+/// exit 2, naming the file and what was expected.
+#[test]
+fn mole_info_lists_every_topic_with_plausible_counts() {
+    let _serial = serial();
+    let run = lockstep_run("info", 300, 2, true);
+    let ticks = run.summary.expect("a summary").ticks;
+    let recording = run.recording.expect("a recording");
+    let output = mole_info("whole", &recording);
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let count = |topic: &str| -> u64 {
+        let line = text
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(topic))
+            .unwrap_or_else(|| panic!("`mole info` does not list {topic}:\n{text}"));
+        let words: Vec<&str> = line.split_whitespace().collect();
+        words[2]
+            .parse()
+            .unwrap_or_else(|_| panic!("no count in `{line}`"))
+    };
+    for (topic, type_name) in topics::all() {
+        count(topic);
+        assert!(text.contains(type_name), "{type_name}:\n{text}");
+    }
+    assert_eq!(count(topics::WORLD_TRUTH.name), ticks + 1, "{text}");
+    // Sensing answers every truth but the last (the run ends with it).
+    assert_eq!(count(topics::SENSING_SCAN.name), ticks, "{text}");
+    assert_eq!(count(topics::WORLD_MAP.name), 1, "{text}");
+    let grids = count(topics::MAPPING_GRID.name);
+    assert!(
+        (ticks / 10..=ticks / 10 + 2).contains(&grids),
+        "{grids} grids in {ticks} ticks:\n{text}"
+    );
+    assert!(count(topics::STACK_STATS.name) > 0, "{text}");
+    assert!(
+        text.contains(&format!("Ticks:      {}", ticks + 1)),
+        "{text}"
+    );
+    assert!(text.contains("clock_mode: lockstep"), "{text}");
+    assert!(text.contains("seed: 2"), "{text}");
+    assert!(
+        text.contains("launch_file: ("),
+        "the launch file's text:\n{text}"
+    );
+
+    let output = mole_info("cut", &recording[..recording.len() * 2 / 3]);
+    let error = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{error}");
+    assert!(error.contains("mole-info-cut-"), "names the file: {error}");
+    assert!(error.contains("truncated"), "{error}");
+    assert!(
+        error.contains("expected a file `mole record` finished"),
+        "{error}"
+    );
+    let output = mole_info("toml", b"[stack]\nmode = \"lockstep\"\n");
+    let error = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{error}");
+    assert!(error.contains("not an MCAP file"), "{error}");
+}
+
+/// A recorder SIGKILLed mid-run does not stop the run, and leaves a file whose complete chunks a
+/// streaming reader reads: truths of consecutive ticks from 0, each at its simulated time.
+#[test]
+fn a_killed_recorder_leaves_every_complete_chunk_readable() {
+    let _serial = serial();
+    let stack = start("killed", &["--mode", "lockstep", "--ticks", "3000"], true);
+    let file = recording_of(&stack);
+    let deadline = Instant::now() + RUN_TIMEOUT;
+    // A few chunks in (a chunk is 1 MiB before compression, closed at least once a second).
+    while std::fs::metadata(&file).map_or(0, |m| m.len()) < 300_000 {
+        assert!(
+            Instant::now() < deadline,
+            "the recording never grew\n{}",
+            logs(&stack.out)
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Mid-run: the world still steps (a recorder that wrote only at the end would grow its
+    // file only after the world stopped).
+    let world = pid_of(&stack.namespace, Role::World.spec().program);
+    let recorder = pid_of(&stack.namespace, "mole-recorder").expect("a running recorder");
+    signal(recorder, nix::sys::signal::Signal::SIGKILL);
+    assert!(
+        world.is_some(),
+        "the recording grew only after the run\n{}",
+        logs(&stack.out)
+    );
+    let killed_at = std::fs::read(&file).expect("the recording");
+    let run = finish(stack);
+    assert!(
+        run.output.status.success(),
+        "the run goes on:\n{}",
+        run.logs
+    );
+    assert_eq!(run.summary.expect("a summary").ticks, 3000);
+
+    let truths = truths(&killed_at);
+    assert!(
+        !truths.is_empty(),
+        "no complete chunk in {} bytes",
+        killed_at.len()
+    );
+    assert!(
+        truths.len() < 3001,
+        "the recorder was killed before the run's end"
+    );
+    for (i, (time, truth)) in truths.iter().enumerate() {
+        assert_eq!(truth.header.tick, i as u64, "consecutive ticks from 0");
+        assert_eq!(
+            *time,
+            truth.header.tick * 10_000_000,
+            "log time = tick × dt"
+        );
+        assert!(truth.x.is_finite() && truth.y.is_finite());
+    }
+    let output = mole_info("killed", &killed_at);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("truncated"));
+}
+
+/// A process killed mid-run is restarted, the recording goes on across the restart, and the
+/// restart is in the file as an event on `stack/events`.
+#[test]
+fn a_restart_is_recorded_and_the_recording_goes_on_across_it() {
+    let _serial = serial();
+    let stack = start("restart", &["--mode", "realtime", "--ticks", "600"], true);
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(1500));
+    let sensing = Role::Sensing.spec().program;
+    let victim = pid_of(&stack.namespace, sensing).expect("a running sensing process");
+    signal(victim, nix::sys::signal::Signal::SIGKILL);
+    let run = finish(stack);
+    assert!(run.output.status.success(), "{}", run.logs);
+    let recording = run.recording.expect("a recording");
+    let messages = stream(&recording);
+    let restart = messages
+        .iter()
+        .filter(|(topic, _, _)| topic == "stack/events")
+        .map(|(_, _, data)| serde_json::from_slice::<serde_json::Value>(data).expect("JSON"))
+        .find(|e| e["kind"] == "restarted" && e["role"] == Role::Sensing.name())
+        .unwrap_or_else(|| panic!("no restart of sensing among the events\n{}", run.logs));
+    assert_eq!(restart["old_pid"], victim, "{restart}");
+    let restart_tick = restart["tick"].as_u64().expect("a tick");
+    let scans_after = messages
+        .iter()
+        .filter(|(topic, time, _)| {
+            topic == topics::SENSING_SCAN.name && *time > restart_tick * 10_000_000
+        })
+        .count();
+    assert!(
+        scans_after > 50,
+        "{scans_after} scans after the restart at {restart_tick}"
+    );
+}
+
+/// `mole record` attached to a running stack records it until the stack ends, then finishes
+/// its file: every truth from the first it read to the run's last.
+#[test]
+fn mole_record_attaches_to_a_running_stack_until_it_ends() {
+    let _serial = serial();
+    let stack = start("attach", &["--mode", "realtime", "--ticks", "400"], false);
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
+    let file = stack.out.join(RECORDING);
+    let recorder = Command::new(bin_dir().join("mole"))
+        .current_dir(workspace())
+        .args(["record", "--namespace", &stack.namespace])
+        .arg(&file)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start mole record");
+    let recorded = wait_or_kill(recorder, RUN_TIMEOUT);
+    let recording = std::fs::read(&file);
+    let run = finish(stack);
+    assert!(
+        recorded.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&recorded.stderr),
+        run.logs
+    );
+    assert!(run.output.status.success(), "{}", run.logs);
+    let recording = recording.expect("a recording");
+    assert!(recording.ends_with(mcap::MAGIC), "a finished file");
+    let ticks: Vec<u64> = truths(&recording)
+        .iter()
+        .map(|(_, t)| t.header.tick)
+        .collect();
+    let (first, last) = (ticks[0], ticks[ticks.len() - 1]);
+    assert_eq!(last, run.summary.expect("a summary").ticks);
+    assert_eq!(ticks, (first..=last).collect::<Vec<_>>());
+}
+
+/// Bad recording settings, and `mole record` where no stack runs, are refused with exit 2
+/// before anything starts, naming what is wrong.
+#[test]
+fn bad_recording_settings_are_refused_before_anything_starts() {
+    let namespace = unique_namespace("bad-record");
+    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+    let file = out.join(RECORDING).display().to_string();
+    let output = run_mole(&[
+        "up",
+        "--record",
+        &file,
+        "--record-every",
+        "mapping/gird=3",
+        "--namespace",
+        &namespace,
+        "--out",
+        &out.display().to_string(),
+        "--quiet",
+    ]);
+    let refused = processes_of(&namespace).is_empty() && !Path::new(&file).exists();
+    let _ = std::fs::remove_dir_all(&out);
+    let error = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{error}");
+    assert!(
+        error.contains("--record-every `mapping/gird=3`: `mapping/gird` is not a topic"),
+        "{error}"
+    );
+    assert!(refused, "nothing started, nothing written");
+    let output = run_mole(&["record", "--namespace", &namespace, &file]);
+    let error = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{error}");
+    assert!(
+        error.contains(&format!("no stack runs in namespace `{namespace}`")),
+        "{error}"
+    );
+    assert!(!Path::new(&file).exists());
+}
+
+/// A Python with the `mcap` package (target/python-env first, then python3 on PATH), or why
+/// there is none.
+fn python_with_mcap() -> Result<String, String> {
+    let venv = workspace().join("target/python-env/bin/python3");
+    let mut reasons = Vec::new();
+    for candidate in [venv.display().to_string(), "python3".to_string()] {
+        match Command::new(&candidate)
+            .args(["-c", "import mcap.reader, lz4"])
+            .output()
+        {
+            Err(e) => reasons.push(format!("{candidate}: {e}")),
+            Ok(out) if !out.status.success() => {
+                reasons.push(format!("{candidate} cannot import mcap.reader and lz4"));
+            }
+            Ok(_) => return Ok(candidate),
+        }
+    }
+    Err(format!(
+        "no Python with the mcap package ({}); scripts/python-env.sh installs one",
+        reasons.join("; ")
+    ))
+}
+
+/// Decodes the truth of tick `argv[2]` from the recording `argv[1]` with nothing but the
+/// channel's schema: the field table's offsets and types.
+const DECODE_TRUTH: &str = r#"
+import json, struct, sys
+from mcap.reader import make_reader
+
+PRIMITIVES = {"u8": "B", "u16": "H", "u32": "I", "u64": "Q", "i8": "b", "i16": "h",
+              "i32": "i", "i64": "q", "f32": "f", "f64": "d"}
+
+def read(layout, data, path):
+    table, offset = layout, 0
+    for name in path.split("."):
+        field = next(f for f in table["fields"] if f["name"] == name)
+        offset += field["offset"]
+        if field["type"] in PRIMITIVES:
+            return struct.unpack_from("<" + PRIMITIVES[field["type"]], data, offset)[0]
+        table = layout["structs"][field["type"]]
+    raise KeyError(path)
+
+path, tick = sys.argv[1], int(sys.argv[2])
+with open(path, "rb") as f:
+    for schema, channel, message in make_reader(f).iter_messages(topics=["world/truth"]):
+        assert schema.encoding == "mole-layout", schema.encoding
+        layout = json.loads(schema.data)
+        assert len(message.data) == layout["size"], (len(message.data), layout["size"])
+        if read(layout, message.data, "header.tick") == tick:
+            # repr: the shortest text that reads back as the same double.
+            print(json.dumps({"type": schema.name, "log_time": message.log_time,
+                              "x": repr(read(layout, message.data, "x")),
+                              "y": repr(read(layout, message.data, "y")),
+                              "theta": repr(read(layout, message.data, "theta"))}))
+            break
+"#;
+
+/// The `mcap` package from PyPI, knowing nothing of mole but the schema, decodes a truth to the
+/// values the Rust side reads from the same bytes.
+#[test]
+fn python_decodes_a_recorded_truth_with_the_schema_alone() {
+    let test = "python_decodes_a_recorded_truth_with_the_schema_alone";
+    let python = match python_with_mcap() {
+        Ok(python) => python,
+        Err(reason) => return skip(test, &reason),
+    };
+    let _serial = serial();
+    let run = lockstep_run("python", 200, 3, true);
+    let recording = run.recording.expect("a recording");
+    let path = std::env::temp_dir().join(format!("mole-python-{}.mcap", std::process::id()));
+    std::fs::write(&path, &recording).expect("write the recording");
+    let tick = 150;
+    let output = Command::new(&python)
+        .args([
+            "-c",
+            DECODE_TRUTH,
+            &path.display().to_string(),
+            &tick.to_string(),
+        ])
+        .output()
+        .expect("run python");
+    let _ = std::fs::remove_file(&path);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let decoded: serde_json::Value = serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("python printed no truth of tick {tick} ({e}): {stdout}"));
+    let (time, truth) = truths(&recording)
+        .into_iter()
+        .find(|(_, t)| t.header.tick == tick)
+        .expect("the truth of the tick");
+    assert_eq!(decoded["type"], "mole.Truth.v1");
+    assert_eq!(decoded["log_time"], time);
+    let double = |field: &str| -> f64 {
+        let text = decoded[field].as_str().unwrap_or_default();
+        text.parse()
+            .unwrap_or_else(|_| panic!("{field}: `{text}` is not a number"))
+    };
+    assert_eq!(double("x"), truth.x);
+    assert_eq!(double("y"), truth.y);
+    assert_eq!(double("theta"), truth.theta);
+    assert!(truth.x != 0.0 || truth.y != 0.0, "a real pose: {truth:?}");
+}
