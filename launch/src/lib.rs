@@ -15,6 +15,7 @@ pub mod keeper;
 pub mod launch_file;
 pub mod order;
 pub mod record;
+pub mod replay;
 pub mod stats;
 pub mod supervisor;
 pub mod swap;

@@ -5,6 +5,7 @@ use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
 use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
 use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
+use mole_launch::replay::{ReplayArgs, replay};
 use mole_launch::top::{TopArgs, top};
 use mole_launch::up::{UpArgs, up};
 use std::process::ExitCode;
@@ -35,6 +36,9 @@ enum Command {
     Top(TopArgs),
     /// Record every topic of a running stack into an MCAP file, until Ctrl-C or the stack ends.
     Record(RecordArgs),
+    /// Run a recorded stack again with its recorded roles (default world,sensing) played back
+    /// from the file; --check compares the live roles' outputs with the recording's.
+    Replay(ReplayArgs),
     /// Describe a recording: duration, ticks, topics with counts and rates, metadata.
     Info(InfoArgs),
     /// Measure latency and throughput.
@@ -61,6 +65,7 @@ fn main() -> ExitCode {
         Command::Status(args) => status(&args),
         Command::Top(args) => top(&args),
         Command::Record(args) => record(&args),
+        Command::Replay(args) => replay(&args),
         Command::Info(args) => info(&args),
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
         Command::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),

@@ -109,6 +109,9 @@ pub struct UpArgs {
     /// mapping/grid=10 and mapping/contact=10; N = 1 writes every sample).
     #[arg(long = "record-every", value_name = "TOPIC=N", requires = "record")]
     pub record_every: Vec<String>,
+    /// `mole replay`: the player in the place of the roles it plays back.
+    #[arg(skip)]
+    pub stand_in: Option<Box<crate::replay::StandIn>>,
 }
 
 /// A failure of `mole up`, with the exit code it deserves.
@@ -222,7 +225,10 @@ pub struct RunOutcome {
 
 /// Runs the stack to its end (or Ctrl-C); the summary is in `args.out`.
 pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
-    let plan = prepare(args)?;
+    let mut plan = prepare(args)?;
+    if let Some(stand_in) = &args.stand_in {
+        stand_in.apply(&mut plan.launch, &mut plan.programs, &plan.beside)?;
+    }
     let recording = match &args.record {
         Some(file) => Some(RecordPlan::new(
             file,

@@ -30,7 +30,9 @@ fn listed_subcommands(args: &[&str]) -> Vec<String> {
 fn help_lists_every_subcommand() {
     assert_eq!(
         listed_subcommands(&[]),
-        ["up", "swap", "stop", "status", "top", "bench", "help"]
+        [
+            "up", "swap", "stop", "status", "top", "record", "replay", "info", "bench", "help"
+        ]
     );
     assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
     for command in [
@@ -39,6 +41,9 @@ fn help_lists_every_subcommand() {
         &["stop"],
         &["status"],
         &["top"],
+        &["record"],
+        &["replay"],
+        &["info"],
         &["bench", "ipc"],
         &["bench", "stack"],
     ] {

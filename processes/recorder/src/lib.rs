@@ -3,9 +3,14 @@
 //! The pure part lives here and is tested without IPC: the channels' schemas from the layout
 //! table ([`schema`]), which samples of a topic are written ([`every`]), samples lost before
 //! they were read ([`gaps`]), the processes' events ([`events`]), the file itself ([`file`]),
-//! the run's metadata ([`metadata`]) and the description of a finished file ([`info`]). The
-//! `mole-recorder` binary (src/main.rs) reads the stack's topics and feeds these.
+//! the run's metadata ([`metadata`]), the description of a finished file ([`info`]), a
+//! recording read back for playback ([`tape`]), who plays what in a replay ([`cast`]) and a
+//! replay checked against it ([`check`]). The `mole-recorder` binary (src/main.rs) reads the
+//! stack's topics and feeds these; the `mole-player` binary (src/bin/mole-player.rs) publishes a
+//! recording's roles into a live stack.
 
+pub mod cast;
+pub mod check;
 pub mod events;
 pub mod every;
 pub mod file;
@@ -13,7 +18,10 @@ pub mod gaps;
 pub mod info;
 pub mod metadata;
 pub mod schema;
+pub mod tape;
 
+pub use cast::Cast;
+pub use check::{Compared, Difference, compare};
 pub use events::{EVENTS_TOPIC, Event, ProcessWatch};
 pub use every::Every;
 pub use file::{RECORDING_METADATA, RUN_METADATA, Record, RecordError, Recording, Written};
@@ -21,3 +29,4 @@ pub use gaps::Gaps;
 pub use info::{Info, InfoError, read_info};
 pub use metadata::{RunFacts, run_metadata, source_revision};
 pub use schema::{MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json};
+pub use tape::{Sample, Tape, TapeError, Window, read_tape};

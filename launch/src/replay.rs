@@ -1,0 +1,300 @@
+//! `mole replay FILE`: the recorded run's stack again, from the recording's launch file,
+//! scenario, seed and clock mode, with the player (`mole-player`) in place of the roles it
+//! replays; `--check` records the replay and compares the live roles' outputs with the
+//! recording's, tick by tick.
+
+use crate::up::{Failure, UpArgs, up};
+use crate::{LaunchFile, ProcessSpec, RestartPolicy, resolve_program};
+use clap::Args;
+use mole_recorder::cast::{Cast, DEFAULT_REPLACED};
+use mole_recorder::{Window, compare, read_tape};
+use mole_types::ClockMode;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The player's program, found next to `mole`, then on PATH.
+pub const PLAYER_PROGRAM: &str = "mole-player";
+/// The player's role in the launch plan, its log file and its statistics.
+pub const PLAYER: &str = "player";
+/// The grids at every tick in the replay's own recording, so `--check` finds each tick the
+/// original kept.
+const EVERY_GRID: [&str; 2] = ["mapping/grid=1", "mapping/contact=1"];
+
+#[derive(Debug, Clone, Args)]
+pub struct ReplayArgs {
+    /// A recording of `mole up --record FILE`.
+    pub file: PathBuf,
+    /// The roles to play back from the file, comma-separated (any roles of the graph); the
+    /// others run live.
+    #[arg(long, default_value = DEFAULT_REPLACED)]
+    pub replace: String,
+    /// Realtime: play this many times as fast as recorded.
+    #[arg(long, default_value_t = 1.0)]
+    pub rate: f64,
+    /// The first tick to play.
+    #[arg(long)]
+    pub from: Option<u64>,
+    /// The last tick to play.
+    #[arg(long)]
+    pub to: Option<u64>,
+    /// Compare the live roles' outputs with the recorded ones, tick by tick: exit 1 naming the
+    /// first tick, topic and field that differ.
+    #[arg(long)]
+    pub check: bool,
+    /// Namespace of the replayed stack.
+    #[arg(long, default_value = "robot0")]
+    pub namespace: String,
+    /// Output directory for summary.json, map.png, the logs and the replay's inputs.
+    #[arg(long, default_value = "runs/replay")]
+    pub out: PathBuf,
+    /// No progress bar (logs only).
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// The player in the place of the replayed roles: what `mole up` starts instead of them.
+#[derive(Debug, Clone)]
+pub struct StandIn {
+    pub cast: Cast,
+    /// The player's arguments: the file, the roles, rate and window.
+    pub args: Vec<String>,
+}
+
+impl StandIn {
+    /// Takes the replaced roles out of `launch` and puts the player in their place: it waits
+    /// for what they waited for, and whatever waited for them waits for it.
+    pub fn apply(
+        &self,
+        launch: &mut LaunchFile,
+        programs: &mut BTreeMap<String, PathBuf>,
+        beside: &Path,
+    ) -> Result<(), Failure> {
+        let replaced: Vec<&str> = self.cast.replaced.iter().map(|r| r.name()).collect();
+        if let Some(missing) = replaced.iter().find(|r| launch.process(r).is_none()) {
+            return Err(Failure::input(format!(
+                "--replace {missing}: the recording's launch file has no process in that role \
+                 (it has {})",
+                launch.roles().join(", ")
+            )));
+        }
+        let program =
+            resolve_program(PLAYER_PROGRAM, beside).map_err(|e| Failure::input(e.to_string()))?;
+        let mut depends_on = Vec::new();
+        for process in launch
+            .processes
+            .iter()
+            .filter(|p| replaced.contains(&&*p.role))
+        {
+            depends_on.extend(process.depends_on.iter().cloned());
+        }
+        depends_on.retain(|d| !replaced.contains(&d.as_str()));
+        depends_on.sort();
+        depends_on.dedup();
+        launch
+            .processes
+            .retain(|p| !replaced.contains(&p.role.as_str()));
+        for process in &mut launch.processes {
+            for dependency in &mut process.depends_on {
+                if replaced.contains(&dependency.as_str()) {
+                    *dependency = PLAYER.to_string();
+                }
+            }
+            process.depends_on.dedup();
+        }
+        launch.processes.push(ProcessSpec {
+            role: PLAYER.to_string(),
+            command: PLAYER_PROGRAM.to_string(),
+            args: self.args.clone(),
+            env: BTreeMap::new(),
+            depends_on,
+            // A player restarted would play the recording from its start again.
+            restart: RestartPolicy::default(),
+        });
+        programs.retain(|role, _| !replaced.contains(&role.as_str()));
+        programs.insert(PLAYER.to_string(), program);
+        Ok(())
+    }
+}
+
+/// `mole replay FILE`: runs the recorded stack with the player in place of the replaced roles;
+/// with `--check`, fails (exit 1) on the first output that differs from the recording.
+pub fn replay(args: &ReplayArgs) -> Result<(), Failure> {
+    let cast = Cast::parse(&args.replace).map_err(|e| Failure::input(format!("--replace: {e}")))?;
+    if cast.replaced.is_empty() {
+        return Err(Failure::input(
+            "--replace: no role named; expected roles of the graph, e.g. world,sensing",
+        ));
+    }
+    if !(args.rate.is_finite() && args.rate > 0.0) {
+        return Err(Failure::input(format!(
+            "--rate: expected a positive factor, found {}",
+            args.rate
+        )));
+    }
+    let file = std::path::absolute(&args.file).unwrap_or_else(|_| args.file.clone());
+    let tape = read_tape(&file, &[], Window::ALL).map_err(|e| Failure::input(e.to_string()))?;
+    let missing = |what: &str| {
+        Failure::input(format!(
+            "{}: the recording does not hold its {what} (recorded by `mole record` attached to a \
+             running stack?); replay needs a recording of `mole up --record`",
+            file.display()
+        ))
+    };
+    let launch_text = tape
+        .fact("launch_file")
+        .ok_or_else(|| missing("launch file"))?;
+    let scenario_text = tape.fact("scenario").ok_or_else(|| missing("scenario"))?;
+    let seed: u64 = tape
+        .fact("seed")
+        .and_then(|s| s.parse().ok())
+        .ok_or_else(|| missing("seed"))?;
+    let mode: ClockMode = tape
+        .fact("clock_mode")
+        .and_then(|m| m.parse().ok())
+        .ok_or_else(|| missing("clock mode"))?;
+    let (first, last) = tape
+        .ticks()
+        .ok_or_else(|| missing("ticks (no world/truth)"))?;
+    let window = Window {
+        from: args.from.unwrap_or(first),
+        to: args.to.unwrap_or(last).min(last),
+    };
+    if window.from > window.to {
+        return Err(Failure::input(format!(
+            "--from {} --to {}: the recording holds ticks {first}..={last}",
+            window.from, window.to
+        )));
+    }
+    if args.check && mode != ClockMode::Lockstep {
+        return Err(Failure::input(format!(
+            "--check: {} is a {mode} recording; only a lockstep run is reproducible step by step",
+            file.display()
+        )));
+    }
+    if args.check && window.from > first {
+        return Err(Failure::input(format!(
+            "--check --from {}: the live roles would start without the ticks before it that made \
+             the recorded outputs; check from the start ({first})",
+            window.from
+        )));
+    }
+
+    let inputs = args.out.join("replay");
+    let written = |name: &str, text: &str| -> Result<PathBuf, Failure> {
+        let path = inputs.join(name);
+        std::fs::create_dir_all(&inputs)
+            .and_then(|()| std::fs::write(&path, text))
+            .map_err(|e| Failure::input(format!("cannot write {}: {e}", path.display())))?;
+        Ok(path)
+    };
+    let launch = written("launch.toml", launch_text)?;
+    let scenario = written("scenario.toml", scenario_text)?;
+    let replayed = inputs.join("replayed.mcap");
+    let player_args = vec![
+        file.display().to_string(),
+        "--replace".to_string(),
+        cast.names(),
+        "--rate".to_string(),
+        args.rate.to_string(),
+        "--from".to_string(),
+        window.from.to_string(),
+        "--to".to_string(),
+        window.to.to_string(),
+    ];
+    let up_args = UpArgs {
+        launch: Some(launch),
+        scenario: Some(scenario),
+        planner: None,
+        estimator: None,
+        mode: Some(mode),
+        ticks: Some(window.to),
+        duration: None,
+        goal: None,
+        local_planner: None,
+        seed: Some(seed),
+        namespace: args.namespace.clone(),
+        out: args.out.clone(),
+        swaps: Vec::new(),
+        quiet: args.quiet,
+        record: args.check.then(|| replayed.clone()),
+        record_every: match args.check {
+            true => EVERY_GRID.iter().map(|s| s.to_string()).collect(),
+            false => Vec::new(),
+        },
+        stand_in: Some(Box::new(StandIn {
+            cast: cast.clone(),
+            args: player_args,
+        })),
+    };
+    println!(
+        "replaying {} (ticks {}..={}, {mode}): {} from the file, the other roles live",
+        file.display(),
+        window.from,
+        window.to,
+        cast.names()
+    );
+    up(&up_args)?;
+    if !args.check {
+        return Ok(());
+    }
+    let compared = cast.compared();
+    match compare(&file, &replayed, &compared, window).map_err(|e| Failure::run(e.to_string()))? {
+        Ok(done) => {
+            println!(
+                "check: identical: {} samples of {} over ticks {}..={}",
+                done.samples,
+                compared.join(", "),
+                done.window.from,
+                done.window.to
+            );
+            Ok(())
+        }
+        Err(difference) => Err(Failure::run(format!("check failed: {difference}"))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::parse_launch_file;
+
+    /// The player takes the world's and sensing's places: it waits for what the world waited
+    /// for, less sensing, and nothing is left waiting for a role that is not started.
+    #[test]
+    fn the_player_stands_in_for_the_replaced_roles() {
+        let text =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/stacks/lockstep.toml"))
+                .expect("launch file");
+        let mut launch = parse_launch_file(&text, Path::new("lockstep.toml")).expect("parse");
+        let mut programs: BTreeMap<String, PathBuf> = launch
+            .processes
+            .iter()
+            .map(|p| (p.role.clone(), PathBuf::from(&p.command)))
+            .collect();
+        let stand_in = StandIn {
+            cast: Cast::parse("world,sensing").unwrap(),
+            args: vec!["run.mcap".into()],
+        };
+        let beside = std::env::temp_dir().join(format!("mole-replay-{}", std::process::id()));
+        std::fs::create_dir_all(&beside).unwrap();
+        let player = beside.join(PLAYER_PROGRAM);
+        std::fs::write(&player, "#!/bin/sh\n").unwrap();
+        std::fs::set_permissions(&player, std::os::unix::fs::PermissionsExt::from_mode(0o755))
+            .unwrap();
+        let applied = stand_in.apply(&mut launch, &mut programs, &beside);
+        std::fs::remove_dir_all(&beside).unwrap();
+        applied.expect("applied");
+        assert_eq!(
+            launch.roles(),
+            ["localization", "mapping", "planning", "monitor", PLAYER]
+        );
+        let player = launch.process(PLAYER).expect("player");
+        assert_eq!(
+            player.depends_on,
+            ["localization", "mapping", "monitor", "planning"]
+        );
+        assert_eq!(player.args, ["run.mcap"]);
+        assert!(programs.contains_key(PLAYER) && !programs.contains_key("world"));
+        crate::start_order(&launch.processes).expect("an order");
+    }
+}
