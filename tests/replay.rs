@@ -4,6 +4,7 @@
 //! ends where it is told; bad input is refused before anything starts.
 
 use mole_integration_tests::*;
+use mole_types::Role;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -220,6 +221,42 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     for namespace in &namespaces {
         assert_eq!(records_of(namespace), Vec::<String>::new(), "{namespace}");
     }
+
+    // Bad input with a real recording: cut short, or into a namespace a stack is running in;
+    // each refused with exit 2, naming what is wrong, and nothing of its own started.
+    let cut = dir.0.join("cut.mcap");
+    let bytes = std::fs::read(&file).expect("read the recording");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write a truncated copy");
+    let output = run_mole(&["replay", &cut.display().to_string(), "--quiet"]);
+    let said = text(&output);
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    assert!(said.contains(&cut.display().to_string()), "{said}");
+    assert!(said.contains("truncated"), "{said}");
+
+    let busy = Stack::start("replay-busy", &["--mode", "realtime", "--ticks", "100000"]);
+    busy.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
+    let running = processes_of(&busy.namespace);
+    let out = dir.0.join("into-busy");
+    let output = run_mole(&[
+        "replay",
+        &file.display().to_string(),
+        "--namespace",
+        &busy.namespace,
+        "--quiet",
+        "--out",
+        &out.display().to_string(),
+    ]);
+    let said = text(&output);
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains(&busy.namespace) && said.contains("in use"),
+        "{said}"
+    );
+    assert_eq!(
+        processes_of(&busy.namespace),
+        running,
+        "a replay process started"
+    );
 }
 
 /// A file that is not there, a file that is not a recording and a role the graph does not have

@@ -287,6 +287,29 @@ pub(crate) mod tests {
         assert_eq!(tape.fact("seed"), Some("7"));
     }
 
+    /// A recording whose topic carries another message type than this build's (here the truth
+    /// recorded as odometry, as a build with other layouts would name it) is refused, naming
+    /// the file, the topic and both type names.
+    #[test]
+    fn a_recording_of_other_message_layouts_is_refused_naming_them() {
+        let file = TempFile::new("layouts");
+        let mut names = topics::all();
+        let truth = names
+            .iter_mut()
+            .find(|(topic, _)| *topic == topics::WORLD_TRUTH.name)
+            .expect("world/truth is a topic");
+        let expected = truth.1;
+        truth.1 = <mole_types::Odom as mole_types::Message>::wire_type_name();
+        let run = BTreeMap::from([("clock_mode".to_string(), "lockstep".to_string())]);
+        let r = Recording::create(&file.0, &names, run).expect("create");
+        r.finish(10_000_000, BTreeMap::new()).expect("finish");
+        let refused = read_tape(&file.0, &[], Window::ALL).expect_err("other layouts");
+        let said = refused.to_string();
+        assert!(said.contains(&*file.0.to_string_lossy()), "{said}");
+        assert!(said.contains("world/truth"), "{said}");
+        assert!(said.contains(expected) && said.contains("mole.Odom"), "{said}");
+    }
+
     /// A file that is not MCAP is refused naming it.
     #[test]
     fn a_file_that_is_not_a_recording_is_refused_naming_it() {
