@@ -60,6 +60,7 @@ pub fn cleanup_dead_nodes() -> usize {
         tracing::warn!("cannot list nodes: {e:?}");
         return 0;
     }
+    let dead_ids: HashSet<u128> = dead.iter().map(|view| view.id().value()).collect();
     let mut cleaned = 0;
     let mut failed = 0;
     for view in dead {
@@ -80,7 +81,8 @@ pub fn cleanup_dead_nodes() -> usize {
         + remove_half_made_nodes(&nodes_dir, &config.global.prefix, &listed)
         + remove_half_made_services(config)
         + remove_orphaned_services(config)
-        + remove_orphaned_port_segments(config);
+        + remove_orphaned_port_segments(config)
+        + remove_dead_doorbells(config, &listed, &dead_ids);
     if half_made > 0 {
         tracing::info!(
             half_made,
@@ -343,6 +345,29 @@ fn remove_orphaned_services(config: &Config) -> usize {
         removed += 1;
     }
     removed
+}
+
+/// Removes the doorbells (`doorbell.rs`) of dead nodes: at once for a node iceoryx2 listed as
+/// dead, once old enough for one it does not list (its records are gone, or it is still being
+/// made: a node's doorbell is made right after the node). Returns how many were removed.
+fn remove_dead_doorbells(config: &Config, listed: &HashSet<u128>, dead: &HashSet<u128>) -> usize {
+    let gone: Vec<PathBuf> = entries(&crate::doorbell::doorbell_dir(config))
+        .into_iter()
+        .filter(|path| {
+            let Some(node) = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .and_then(|n| n.parse::<u128>().ok())
+            else {
+                return false;
+            };
+            dead.contains(&node)
+                || (!listed.contains(&node)
+                    && all_older_than(std::slice::from_ref(path), HALF_MADE_AGE))
+        })
+        .collect();
+    gone.iter().for_each(|p| remove(p));
+    gone.len()
 }
 
 /// The monitor files (`<prefix><id>.node_monitor…`) of node `id`.

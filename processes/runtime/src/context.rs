@@ -2,6 +2,7 @@
 
 use crate::admin::create_node;
 use crate::clock::ClockMode;
+use crate::doorbell::{Doorbell, LISTENER_NAME};
 use crate::error::RuntimeError;
 use crate::ports::{Publisher, Subscriber};
 use crate::stats::StatsRegistry;
@@ -16,6 +17,10 @@ use std::time::{Duration, Instant};
 
 /// How often a process publishes its statistics.
 const STATS_PERIOD: Duration = Duration::from_secs(1);
+
+/// The topic whose publication closes the loop's step: the command, the world's one input in the
+/// graph (`mole_types::graph`). Realtime processes beside the loop wake on it.
+const LOOP_CLOSE: Topic<mole_types::Cmd> = topics::PLANNING_CMD;
 
 /// The arguments every process takes, from its command line or the environment the launcher
 /// sets (`mole_types::env`).
@@ -50,6 +55,8 @@ type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Ser
 /// One process's link to the stack: its node in the namespace, its statistics, its shutdown flag.
 pub struct Context {
     node: Node<ipc::Service>,
+    /// What wakes this node's WaitSets: every mole publisher of a topic it listens to rings it.
+    doorbell: Rc<Doorbell>,
     namespace: String,
     role: String,
     mode: ClockMode,
@@ -92,8 +99,10 @@ impl Context {
         shutdown: Arc<AtomicBool>,
     ) -> Result<Context, RuntimeError> {
         let node = create_node(&args.namespace, role)?;
+        let doorbell = Rc::new(Doorbell::create(node.id().value())?);
         let mut ctx = Context {
             node,
+            doorbell,
             namespace: args.namespace.clone(),
             role: role.to_string(),
             mode: args.mode,
@@ -328,6 +337,7 @@ impl Context {
             Some(event) => Some(Rc::new(
                 event
                     .listener_builder()
+                    .name(&listener_name()?)
                     .create()
                     .map_err(|e| port_failed(format!("{e:?}")))?,
             )),
@@ -387,6 +397,27 @@ impl Context {
         self.subscriber_on(&topic, pubsub, wakes.then_some(event))
     }
 
+    /// A waker for the close of the loop's step: the listener of the topic that closes it, the
+    /// command the world steps on (its one input in the graph), without a subscriber. `probe` is
+    /// what the WaitSet looks at when a wait ends without a signal.
+    pub(crate) fn loop_closed_waker(
+        &self,
+        probe: Rc<dyn crate::ports::Probe>,
+    ) -> Result<crate::ports::Waker, RuntimeError> {
+        let topic = LOOP_CLOSE;
+        let listener = self
+            .open_event(&self.namespace, &topic)?
+            .listener_builder()
+            .name(&listener_name()?)
+            .create()
+            .map_err(|e| RuntimeError::Port(format!("listener on {}: {e:?}", topic.name)))?;
+        Ok(crate::ports::Waker {
+            topic: topic.name,
+            listener: Some(Rc::new(listener)),
+            probe,
+        })
+    }
+
     /// A replacement's hand-over (`mole swap` sets `MOLE_TAKEOVER`): waits up to `grace` for
     /// the process being replaced to publish `topic` (the replacement's own output) and lends
     /// the newest valid sample to `take`; returns its tick, or `None` when none came, and the
@@ -417,7 +448,14 @@ impl Context {
 
     /// A WaitSet for this process's wake-ups.
     pub fn waitset(&self) -> Result<WaitSet, RuntimeError> {
-        Ok(WaitSet::new())
+        Ok(WaitSet::new(self.doorbell.clone()))
+    }
+
+    /// The read end of this node's doorbell, for tests that take a ring behind the WaitSet's
+    /// back.
+    #[doc(hidden)]
+    pub fn doorbell_fd(&self) -> std::os::fd::BorrowedFd<'_> {
+        self.doorbell.fd()
     }
 
     /// Announces that every port exists: publishes the first statistics at once, which is what
@@ -458,6 +496,12 @@ impl Context {
             }
         }
     }
+}
+
+/// The port name of a listener that wakes a mole node: publishers ring the node's doorbell.
+fn listener_name() -> Result<iceoryx2::port::port_name::PortName, RuntimeError> {
+    iceoryx2::port::port_name::PortName::new(LISTENER_NAME)
+        .map_err(|e| RuntimeError::Name(LISTENER_NAME.to_string(), format!("{e:?}")))
 }
 
 /// User + system CPU time (ns) and peak RSS (bytes) of this process.
@@ -590,5 +634,18 @@ impl Context {
         }
         let pubsub = self.open_pubsub(peer, &topic, true)?;
         self.subscriber_on(&topic, pubsub, None)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The topic the realtime processes beside the loop wake on is the world's one input, the
+    /// command that closes the loop's step.
+    #[test]
+    fn the_loop_closes_with_the_worlds_one_input() {
+        assert_eq!(
+            mole_types::Role::World.spec().inputs,
+            &[super::LOOP_CLOSE.name]
+        );
     }
 }

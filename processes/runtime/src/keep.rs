@@ -8,7 +8,7 @@
 use crate::context::Context;
 use crate::error::RuntimeError;
 use crate::ports::Subscriber;
-use crate::waitset::{WaitSet, Wake};
+use crate::waitset::Wake;
 use crate::{ClockMode, Waker};
 use mole_types::topics::{self, TopicVisitor};
 use mole_types::{Message, Topic};
@@ -175,7 +175,7 @@ impl Keeper {
     /// Keeps the newest samples and answers `requests` until the shutdown flag is set or the
     /// requests' sender is gone.
     pub fn serve(mut self, requests: Receiver<SaveRequest>) -> Result<(), RuntimeError> {
-        let waitset = WaitSet::new();
+        let waitset = self.ctx.waitset()?;
         let lockstep = self.ctx.mode() == ClockMode::Lockstep;
         let wakers: Vec<Waker> = self
             .kept

@@ -6,8 +6,9 @@
 //! run under way and takes over. Underneath: [`Context`], typed [`Subscriber`]s and a
 //! [`WaitSet`] that sleeps until data, a deadline or a shutdown.
 //!
-//! - Every publish also signals the topic's event service, so subscribers sleep in a WaitSet:
-//!   no busy loops, no sleep-polling.
+//! - Every publish also wakes the topic's subscribers, so they sleep in a WaitSet: no busy
+//!   loops, no sleep-polling. A mole node is rung on its doorbell (one named pipe per node), any
+//!   other program through the topic's event service (`doorbell.rs`).
 //! - iceoryx2's own signal handling is disabled on nodes; SIGINT/SIGTERM go to a `ctrlc`
 //!   handler that sets the shutdown flag (iceoryx2 would silently replace it otherwise). The
 //!   [`WaitSet`] polls the listeners' sockets itself: iceoryx2's allocates on every wake-up.
@@ -21,6 +22,7 @@ mod alloc_counter;
 mod clock;
 mod context;
 mod control;
+mod doorbell;
 mod error;
 mod keep;
 mod observe;

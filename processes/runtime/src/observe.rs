@@ -45,13 +45,20 @@ impl Observation<'_> {
 
 impl Process {
     /// Declares an input an observer reads every sample of; `wakes` says whether its samples
-    /// wake the observer (the others are read on those wake-ups).
+    /// wake the observer (the others are read on those wake-ups). In realtime an observer is
+    /// beside the loop: what wakes it is the loop's step closing, not these samples
+    /// ([`Process::wakes_after_the_loop`]).
     pub fn observed<M: Message>(
         &mut self,
         topic: mole_types::Topic<M>,
         wakes: bool,
     ) -> Result<In<M>, crate::RuntimeError> {
-        self.add_input(topic, crate::Rule::Newest, wakes)
+        if !wakes {
+            return self.add_input(topic, crate::Rule::Newest, false);
+        }
+        Ok(In::at(
+            self.add_beside_the_loop(topic, crate::Rule::Newest)?,
+        ))
     }
 
     /// Runs an observer until `on_wake` ends it or a shutdown comes: `init` once the world's map

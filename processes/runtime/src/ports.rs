@@ -1,6 +1,8 @@
-//! Typed ports: a publisher writes a loaned sample in place and signals the topic's event; a
-//! subscriber drains its queue, validates every message, and keeps the newest one borrowed.
+//! Typed ports: a publisher writes a loaned sample in place and wakes the topic's listeners (the
+//! doorbells of mole nodes, the event service for the others); a subscriber drains its queue,
+//! validates every message, and keeps the newest one borrowed.
 
+use crate::doorbell::Rings;
 use crate::error::RuntimeError;
 use crate::stats::PortHandle;
 use crate::time::now_ns;
@@ -30,6 +32,16 @@ pub(crate) struct PublisherPorts<M: Message> {
     topic: &'static str,
     publisher: iceoryx2::port::publisher::Publisher<ipc::Service, M, ()>,
     notifier: Notifier<ipc::Service>,
+    /// The doorbells of the nodes listening on the topic's event service.
+    rings: core::cell::RefCell<Rings>,
+}
+
+impl<M: Message> PublisherPorts<M> {
+    /// Wakes every listener of the topic: a mole node by its doorbell, once however many of its
+    /// subscribers listen, any other program through the event service.
+    fn wake_listeners(&self) {
+        self.rings.borrow_mut().notify(&self.notifier);
+    }
 }
 
 /// A publisher that can hand its history to subscribers that joined since it last sent.
@@ -41,9 +53,7 @@ impl<M: Message> OfferHistory for PublisherPorts<M> {
     fn update_connections(&self) {
         use iceoryx2::port::update_connections::UpdateConnections;
         match self.publisher.update_connections() {
-            Ok(()) => {
-                let _ = self.notifier.notify();
-            }
+            Ok(()) => self.wake_listeners(),
             Err(e) => tracing::debug!(topic = self.topic, "update_connections failed: {e:?}"),
         }
     }
@@ -62,6 +72,7 @@ impl<M: Message> Publisher<M> {
                 topic,
                 publisher,
                 notifier,
+                rings: Default::default(),
             }),
             stats,
             seq: 0,
@@ -112,9 +123,7 @@ impl<M: Message> Publisher<M> {
         }
         self.seq += 1;
         self.stats.counted(None);
-        if let Err(e) = self.ports.notifier.notify() {
-            tracing::debug!(topic = self.topic, "notify failed: {e:?}");
-        }
+        self.ports.wake_listeners();
         Ok(())
     }
 

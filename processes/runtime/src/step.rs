@@ -73,6 +73,16 @@ pub struct Trigger<M> {
     _message: PhantomData<fn() -> M>,
 }
 
+impl<M> In<M> {
+    /// The input declared at `index` of the process's ports.
+    pub(crate) fn at(index: usize) -> In<M> {
+        In {
+            index,
+            _message: PhantomData,
+        }
+    }
+}
+
 impl<M> Clone for In<M> {
     fn clone(&self) -> Self {
         *self
@@ -180,6 +190,8 @@ trait Port {
     fn as_any_mut(&mut self) -> &mut dyn Any;
     /// Drops every queued sample (nothing can use them yet).
     fn discard(&mut self);
+    /// A look at the input's queue, for a WaitSet that wakes on another topic.
+    fn probe(&self) -> std::rc::Rc<dyn crate::ports::Probe>;
 }
 
 struct Input<M: Message> {
@@ -232,6 +244,9 @@ impl<M: Message> Port for Input<M> {
     fn discard(&mut self) {
         self.subscriber.drain(|_| {});
     }
+    fn probe(&self) -> std::rc::Rc<dyn crate::ports::Probe> {
+        self.subscriber.subscriber.clone()
+    }
 }
 
 /// A process of the control loop: its context, its declared inputs, its wake-ups.
@@ -245,6 +260,9 @@ pub struct Process {
     /// The trigger: an index into `ports`, and how it is read.
     trigger: Option<(usize, Order)>,
     pub(crate) wakers: Vec<Waker>,
+    /// Whether a waker for the loop's close is among `wakers` already (realtime, a process
+    /// beside the loop: [`Process::wakes_after_the_loop`]).
+    after_loop: bool,
     pub(crate) resume_after: Option<u64>,
 }
 
@@ -270,6 +288,7 @@ impl Process {
             ports: Vec::new(),
             trigger: None,
             wakers: Vec::new(),
+            after_loop: false,
             resume_after: None,
         })
     }
@@ -337,7 +356,9 @@ impl Process {
         Ok(copy)
     }
 
-    /// Declares the input whose new tick starts a step. It wakes the process.
+    /// Declares the input whose new tick starts a step. It wakes the process; in realtime, a
+    /// process beside the loop ([`Order::EveryTick`]) is woken when the loop's step closes
+    /// instead ([`Process::wakes_after_the_loop`]).
     pub fn trigger<M: Message>(
         &mut self,
         topic: Topic<M>,
@@ -349,7 +370,10 @@ impl Process {
                 topic.name
             )));
         }
-        let index = self.add(topic, Rule::SameTick, true)?;
+        let index = match order {
+            Order::EveryTick => self.add_beside_the_loop(topic, Rule::SameTick)?,
+            Order::Newest => self.add(topic, Rule::SameTick, true)?,
+        };
         self.trigger = Some((index, order));
         Ok(Trigger {
             index,
@@ -375,10 +399,36 @@ impl Process {
         rule: Rule,
         wakes: bool,
     ) -> Result<In<M>, RuntimeError> {
-        Ok(In {
-            index: self.add(topic, rule, wakes)?,
-            _message: PhantomData,
-        })
+        Ok(In::at(self.add(topic, rule, wakes)?))
+    }
+
+    /// Declares an input of a process beside the loop that wakes it: in lockstep when the input is
+    /// published, in realtime when the loop's step closes ([`Process::wakes_after_the_loop`]).
+    pub(crate) fn add_beside_the_loop<M: Message>(
+        &mut self,
+        topic: Topic<M>,
+        rule: Rule,
+    ) -> Result<usize, RuntimeError> {
+        if self.ctx.mode() == ClockMode::Lockstep {
+            return self.add(topic, rule, true);
+        }
+        let index = self.add(topic, rule, false)?;
+        if !self.after_loop {
+            let probe = self.ports[index].probe();
+            self.wakers.push(self.ctx.loop_closed_waker(probe)?);
+            self.after_loop = true;
+        }
+        Ok(index)
+    }
+
+    /// Whether this process is woken when the loop's step closes (the command that ends it is
+    /// published) rather than by its own inputs: realtime, beside the loop (mapping, the
+    /// monitor, an observer). It then runs while the loop's processes sleep until the next step,
+    /// instead of taking a CPU from them while they pass the step on. Its inputs were all
+    /// published before the command; with no command (no planner), it looks at them when its
+    /// WaitSet times out.
+    pub fn wakes_after_the_loop(&self) -> bool {
+        self.after_loop
     }
 
     /// An input's subscriber, for a loop that reads it itself (an observer).
@@ -818,6 +868,9 @@ impl Port for TableInput {
         self
     }
     fn discard(&mut self) {}
+    fn probe(&self) -> std::rc::Rc<dyn crate::ports::Probe> {
+        unreachable!("a rule table input has no queue")
+    }
 }
 
 #[cfg(test)]

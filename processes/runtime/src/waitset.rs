@@ -2,6 +2,7 @@
 
 use crate::clock::ClockMode;
 use crate::context::Context;
+use crate::doorbell::Doorbell;
 use crate::error::RuntimeError;
 use crate::ports::Waker;
 use iceoryx2::prelude::*;
@@ -27,15 +28,21 @@ pub enum Wake {
 
 /// Sleeps until data on an attached subscriber, a deadline, or a shutdown.
 ///
-/// It sleeps in poll(2) on the sockets of the attached listeners rather than in iceoryx2's
+/// It sleeps in poll(2) on the node's doorbell, which every mole publisher of a topic the node
+/// listens to rings, and on the sockets of the attached listeners, which only publishers that
+/// are not mole Rust processes notify (`doorbell.rs`). It polls rather than using iceoryx2's
 /// WaitSet, which allocates on every wake-up: a step of a process allocates nothing.
 pub struct WaitSet {
-    /// What poll(2) watches: the sockets of the attached listeners, kept between waits.
+    /// The node's doorbell; always the first entry of `sockets`.
+    doorbell: Rc<Doorbell>,
+    /// What poll(2) watches: the doorbell, then the sockets of the attached listeners, kept
+    /// between waits.
     sockets: core::cell::RefCell<Vec<PollFd<'static>>>,
-    /// Every listener ever attached: drained on each wake-up, so a topic the process no longer
-    /// reads (world/map after the first sample) cannot keep the WaitSet awake. Holding them
-    /// keeps their sockets open for as long as the WaitSet lives.
-    listeners: core::cell::RefCell<Vec<Rc<iceoryx2::port::listener::Listener<ipc::Service>>>>,
+    /// Every listener ever attached, by socket: the one whose socket fired is drained on a
+    /// wake-up, all of them when a wait ends without a signal. Holding them keeps their sockets
+    /// open for as long as the WaitSet lives.
+    listeners:
+        core::cell::RefCell<Vec<(RawFd, Rc<iceoryx2::port::listener::Listener<ipc::Service>>)>>,
     /// The queues of the attached subscribers, looked at when a wait ends without a signal.
     probes: core::cell::RefCell<Vec<Rc<dyn crate::ports::Probe>>>,
     /// Whether a sample without its signal was reported already.
@@ -59,9 +66,13 @@ impl Drop for Attachment<'_, '_> {
 }
 
 impl WaitSet {
-    pub(crate) fn new() -> WaitSet {
+    pub(crate) fn new(doorbell: Rc<Doorbell>) -> WaitSet {
+        // SAFETY: the pipe belongs to the doorbell, which the WaitSet holds for as long as it,
+        // and so `sockets`, lives.
+        let pipe = unsafe { BorrowedFd::borrow_raw(doorbell.fd().as_raw_fd()) };
         WaitSet {
-            sockets: core::cell::RefCell::new(Vec::new()),
+            sockets: core::cell::RefCell::new(vec![PollFd::new(pipe, PollFlags::POLLIN)]),
+            doorbell,
             listeners: core::cell::RefCell::new(Vec::new()),
             probes: core::cell::RefCell::new(Vec::new()),
             missed_signal: core::cell::Cell::new(false),
@@ -89,7 +100,7 @@ impl WaitSet {
         // SAFETY: see above; the entry leaves `sockets` when the attachment is dropped.
         let fd = unsafe { BorrowedFd::borrow_raw(socket) };
         sockets.push(PollFd::new(fd, PollFlags::POLLIN));
-        self.listeners.borrow_mut().push(listener.clone());
+        self.listeners.borrow_mut().push((socket, listener.clone()));
         self.probes.borrow_mut().push(waker.probe.clone());
         Ok(Attachment {
             waitset: self,
@@ -106,16 +117,39 @@ impl WaitSet {
         wakers.iter().map(|w| self.attach(w)).collect()
     }
 
-    /// Consumes the wake-up signals of every attached listener, on every return: besides
-    /// emptying the sockets, `try_wait` resets iceoryx2's "notified" state. In iceoryx2 0.10 a
-    /// notification that lands while the listener empties its socket leaves that state set
-    /// with no datagram behind; every later notification is then coalesced away and the
-    /// WaitSet sleeps through them. Only a `try_wait` clears it again, so a timeout drains too.
-    /// (Related upstream report: eclipse-iceoryx/iceoryx2#1811.)
-    fn drain_listeners(&self) {
-        // Before the caller reads the samples: a sample that arrives after this point leaves
-        // its signal pending for the next wait.
-        for listener in self.listeners.borrow().iter() {
+    /// Consumes what woke poll(2): the doorbell's rings, and the signals of the listeners whose
+    /// sockets fired (the others have nothing: a mole publisher rings the doorbell instead).
+    fn take_signals(&self) {
+        for socket in self.sockets.borrow().iter() {
+            if socket.revents().is_none_or(|r| r.is_empty()) {
+                continue;
+            }
+            self.take(socket.as_fd().as_raw_fd());
+        }
+    }
+
+    /// Empties the doorbell if `socket` is its pipe, else drains the listener of `socket`.
+    fn take(&self, socket: RawFd) {
+        if socket == self.doorbell.fd().as_raw_fd() {
+            self.doorbell.empty();
+            return;
+        }
+        if let Some((_, listener)) = self.listeners.borrow().iter().find(|(s, _)| *s == socket) {
+            let _ = listener.try_wait(|_| {});
+        }
+    }
+
+    /// Consumes every signal, of the doorbell and of every listener ever attached. Besides
+    /// emptying the sockets, `try_wait` resets iceoryx2's "notified" state: in iceoryx2 0.10 a
+    /// notification that lands while the listener empties its socket leaves that state set with
+    /// no datagram behind, and every later notification is then coalesced away. Only a
+    /// `try_wait` clears it again, so a wait that ends without a signal drains them all. (Related
+    /// upstream report: eclipse-iceoryx/iceoryx2#1811.) It concerns only the listeners' sockets,
+    /// which programs other than mole's notify; a doorbell ring is a byte in a pipe and cannot be
+    /// coalesced away.
+    fn take_all(&self) {
+        self.doorbell.empty();
+        for (_, listener) in self.listeners.borrow().iter() {
             let _ = listener.try_wait(|_| {});
         }
     }
@@ -142,7 +176,7 @@ impl WaitSet {
                 && left < Duration::from_millis(1)
             {
                 std::thread::sleep(left);
-                self.drain_listeners();
+                self.take_all();
                 // Idle in lockstep: a subscriber that joined late (a restart) may be waiting
                 // for a step this process sent before it came.
                 if ctx.mode() == ClockMode::Lockstep {
@@ -162,12 +196,12 @@ impl WaitSet {
                 Err(e) => return Err(RuntimeError::Wait(e.desc().to_string())),
             };
             if woke {
-                self.drain_listeners();
+                self.take_signals();
                 return Ok(Wake::Data);
             }
-            // No signal: reset a stuck "notified" state (see `drain_listeners`), and if a
-            // sample came without its signal, wake up for it now.
-            self.drain_listeners();
+            // No signal: reset a stuck "notified" state (see `take_all`), and if a sample came
+            // without its signal, wake up for it now.
+            self.take_all();
             if self.probes.borrow().iter().any(|p| p.has_data()) {
                 if !self.missed_signal.replace(true) {
                     tracing::warn!(
