@@ -307,7 +307,10 @@ pub(crate) mod tests {
         let said = refused.to_string();
         assert!(said.contains(&*file.0.to_string_lossy()), "{said}");
         assert!(said.contains("world/truth"), "{said}");
-        assert!(said.contains(expected) && said.contains("mole.Odom"), "{said}");
+        assert!(
+            said.contains(expected) && said.contains("mole.Odom"),
+            "{said}"
+        );
     }
 
     /// A file that is not MCAP is refused naming it.
