@@ -10,6 +10,7 @@ pub mod bench_ipc;
 pub mod bench_stack;
 pub mod control;
 mod error;
+pub mod export;
 pub mod hot_swap;
 pub mod keeper;
 pub mod launch_file;

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
 use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
 use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
+use mole_launch::export::{ExportArgs, export};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
 use mole_launch::top::{TopArgs, top};
@@ -41,6 +42,9 @@ enum Command {
     Replay(ReplayArgs),
     /// Describe a recording: duration, ticks, topics with counts and rates, metadata.
     Info(InfoArgs),
+    /// Write a recording again with Foxglove's well-known schemas (JSON), so Foxglove or
+    /// Lichtblick shows it without a plug-in.
+    Export(ExportArgs),
     /// Measure latency and throughput.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -67,6 +71,7 @@ fn main() -> ExitCode {
         Command::Record(args) => record(&args),
         Command::Replay(args) => replay(&args),
         Command::Info(args) => info(&args),
+        Command::Export(args) => export(&args),
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
         Command::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),
     };

@@ -4,7 +4,8 @@
 //! table ([`schema`]), which samples of a topic are written ([`every`]), samples lost before
 //! they were read ([`gaps`]), the processes' events ([`events`]), the file itself ([`file`]),
 //! the run's metadata ([`metadata`]), the description of a finished file ([`info`]), a
-//! recording read back for playback ([`tape`]), who plays what in a replay ([`cast`]) and a
+//! recording read back for playback ([`tape`]), a recording exported with Foxglove's
+//! well-known schemas ([`foxglove`]), who plays what in a replay ([`cast`]) and a
 //! replay checked against it ([`check`]). The `mole-recorder` binary (src/main.rs) reads the
 //! stack's topics and feeds these; the `mole-player` binary (src/bin/mole-player.rs) publishes a
 //! recording's roles into a live stack.
@@ -14,6 +15,7 @@ pub mod check;
 pub mod events;
 pub mod every;
 pub mod file;
+pub mod foxglove;
 pub mod gaps;
 pub mod info;
 pub mod metadata;
@@ -25,6 +27,7 @@ pub use check::{Compared, Difference, compare};
 pub use events::{EVENTS_TOPIC, Event, ProcessWatch};
 pub use every::Every;
 pub use file::{RECORDING_METADATA, RUN_METADATA, Record, RecordError, Recording, Written};
+pub use foxglove::{ExportError, Exported, export};
 pub use gaps::Gaps;
 pub use info::{Info, InfoError, read_info};
 pub use metadata::{RunFacts, run_metadata, source_revision};
