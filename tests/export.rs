@@ -53,29 +53,6 @@ fn recorded(path: &Path, topic: &str) -> Vec<(u64, Vec<u8>)> {
         .collect()
 }
 
-/// A Python with the `mcap` package (target/python-env first, then python3 on PATH), or why
-/// there is none.
-fn python_with_mcap() -> Result<String, String> {
-    let venv = workspace().join("target/python-env/bin/python3");
-    let mut reasons = Vec::new();
-    for candidate in [venv.display().to_string(), "python3".to_string()] {
-        match Command::new(&candidate)
-            .args(["-c", "import mcap.reader, lz4"])
-            .output()
-        {
-            Err(e) => reasons.push(format!("{candidate}: {e}")),
-            Ok(out) if !out.status.success() => {
-                reasons.push(format!("{candidate} cannot import mcap.reader and lz4"));
-            }
-            Ok(_) => return Ok(candidate),
-        }
-    }
-    Err(format!(
-        "no Python with the mcap package ({}); scripts/python-env.sh installs one",
-        reasons.join("; ")
-    ))
-}
-
 /// Reads the export `argv[1]` knowing only Foxglove's schemas: every channel's schema name and
 /// encodings, the `/truth` pose at log time `argv[2]` (x, y and the yaw of its quaternion) and
 /// the last `/grid`'s columns and rows (its base64 data's length over the row stride).

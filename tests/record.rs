@@ -398,29 +398,6 @@ fn bad_recording_settings_are_refused_before_anything_starts() {
     assert!(!Path::new(&file).exists());
 }
 
-/// A Python with the `mcap` package (target/python-env first, then python3 on PATH), or why
-/// there is none.
-fn python_with_mcap() -> Result<String, String> {
-    let venv = workspace().join("target/python-env/bin/python3");
-    let mut reasons = Vec::new();
-    for candidate in [venv.display().to_string(), "python3".to_string()] {
-        match Command::new(&candidate)
-            .args(["-c", "import mcap.reader, lz4"])
-            .output()
-        {
-            Err(e) => reasons.push(format!("{candidate}: {e}")),
-            Ok(out) if !out.status.success() => {
-                reasons.push(format!("{candidate} cannot import mcap.reader and lz4"));
-            }
-            Ok(_) => return Ok(candidate),
-        }
-    }
-    Err(format!(
-        "no Python with the mcap package ({}); scripts/python-env.sh installs one",
-        reasons.join("; ")
-    ))
-}
-
 /// Decodes the truth of tick `argv[2]` from the recording `argv[1]` with nothing but the
 /// channel's schema: the field table's offsets and types.
 const DECODE_TRUTH: &str = r#"

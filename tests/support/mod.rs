@@ -411,3 +411,26 @@ pub fn made_by<'a>(
         .cloned()
         .collect()
 }
+
+/// A Python with the `mcap` package (target/python-env first, then python3 on PATH), or why
+/// there is none.
+pub fn python_with_mcap() -> Result<String, String> {
+    let venv = workspace().join("target/python-env/bin/python3");
+    let mut reasons = Vec::new();
+    for candidate in [venv.display().to_string(), "python3".to_string()] {
+        match std::process::Command::new(&candidate)
+            .args(["-c", "import mcap.reader, lz4"])
+            .output()
+        {
+            Err(e) => reasons.push(format!("{candidate}: {e}")),
+            Ok(out) if !out.status.success() => {
+                reasons.push(format!("{candidate} cannot import mcap.reader and lz4"));
+            }
+            Ok(_) => return Ok(candidate),
+        }
+    }
+    Err(format!(
+        "no Python with the mcap package ({}); scripts/python-env.sh installs one",
+        reasons.join("; ")
+    ))
+}
