@@ -287,14 +287,34 @@ fn a_killed_recorder_leaves_every_complete_chunk_readable() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("truncated"));
 }
 
-/// A process killed mid-run is restarted, the recording goes on across the restart, and the
-/// restart is in the file as an event on `stack/events`.
+/// A process killed mid-run is restarted and another swapped, the recording goes on across
+/// both, and each is in the file as an event on `stack/events`.
 #[test]
-fn a_restart_is_recorded_and_the_recording_goes_on_across_it() {
+fn a_restart_and_a_swap_are_recorded_and_the_recording_goes_on_across_them() {
     let _serial = serial();
-    let stack = start("restart", &["--mode", "realtime", "--ticks", "600"], true);
+    let stack = start("restart", &["--mode", "realtime", "--ticks", "1000"], true);
     stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(1500));
+    let planning = Role::Planning.spec();
+    let swapped_out = pid_of(&stack.namespace, planning.program).expect("a planning process");
+    let command = format!(
+        "{} --planner {}",
+        planning.program,
+        mole_types::PlannerKind::RandomWalk
+    );
+    let swap = run_mole(&[
+        "swap",
+        "--namespace",
+        &stack.namespace,
+        planning.role.name(),
+        &command,
+    ]);
+    assert!(
+        swap.status.success(),
+        "{}",
+        String::from_utf8_lossy(&swap.stderr)
+    );
+    // After the swap: while a swap waits for its new process, the launcher restarts nothing.
     let sensing = Role::Sensing.spec().program;
     let victim = pid_of(&stack.namespace, sensing).expect("a running sensing process");
     signal(victim, nix::sys::signal::Signal::SIGKILL);
@@ -309,6 +329,13 @@ fn a_restart_is_recorded_and_the_recording_goes_on_across_it() {
         .find(|e| e["kind"] == "restarted" && e["role"] == Role::Sensing.name())
         .unwrap_or_else(|| panic!("no restart of sensing among the events\n{}", run.logs));
     assert_eq!(restart["old_pid"], victim, "{restart}");
+    let swap = messages
+        .iter()
+        .filter(|(topic, _, _)| topic == "stack/events")
+        .map(|(_, _, data)| serde_json::from_slice::<serde_json::Value>(data).expect("JSON"))
+        .find(|e| e["kind"] == "swapped" && e["role"] == Role::Planning.name())
+        .unwrap_or_else(|| panic!("no swap of planning among the events\n{}", run.logs));
+    assert_eq!(swap["old_pid"], swapped_out, "{swap}");
     let restart_tick = restart["tick"].as_u64().expect("a tick");
     let scans_after = messages
         .iter()

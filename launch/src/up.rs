@@ -282,6 +282,13 @@ impl Watch {
         }
     }
 
+    /// A role's process was restarted: its hang timer starts over from now. The old process's
+    /// last statistics are not the new one's: a restart that came late (the supervisor was busy,
+    /// e.g. with a swap) would otherwise be killed as hung the moment it started.
+    fn restarted(&mut self, role: &str) {
+        self.last_heard.insert(role.to_string(), Instant::now());
+    }
+
     /// A process's statistics sample: it is alive (hang detection), ready, and counted.
     fn record(&mut self, s: &Stats) {
         let role = read_name(&s.process).into_owned();
@@ -584,6 +591,7 @@ fn handle_events(stack: &mut Stack<'_>) -> Option<RunEnd> {
                 expected,
             } => on_exit(stack, &role, status, expected),
             SupervisorEvent::Restarted { role, attempt } => {
+                stack.watch.restarted(&role);
                 stack
                     .progress
                     .suspend(|| tracing::warn!(role, attempt, "process restarted"));
@@ -1003,4 +1011,22 @@ fn progress_bar(ticks: u64, quiet: bool) -> ProgressBar {
     }
     bar.enable_steady_tick(Duration::from_millis(200));
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A restarted role's hang timer starts over: its old process's last statistics, however
+    /// old, no longer count against the new one.
+    #[test]
+    fn a_restart_starts_the_hang_timer_over() {
+        let mut watch = Watch::new();
+        let long_ago = Instant::now()
+            .checked_sub(2 * HANG_TIMEOUT)
+            .expect("the clock runs longer than two hang timeouts");
+        watch.last_heard.insert("sensing".into(), long_ago);
+        watch.restarted("sensing");
+        assert!(watch.last_heard["sensing"].elapsed() < HANG_TIMEOUT);
+    }
 }
