@@ -31,7 +31,8 @@ pub fn bin_dir() -> PathBuf {
         .expect("target/<profile>")
         .to_path_buf();
     let programs = mole_types::GRAPH.iter().map(|r| r.program);
-    for name in std::iter::once("mole").chain(programs) {
+    let beside = ["mole", "mole-recorder", "mole-player"];
+    for name in beside.into_iter().chain(programs) {
         assert!(
             dir.join(name).exists(),
             "{} is missing: run the README's test command (it builds every binary first)",
