@@ -64,7 +64,10 @@ fn run(victim: Option<Role>) -> Summary {
 }
 
 /// The killed run's pose RMSE, landmark RMSE and map IoU against the unkilled run's: within a
-/// quarter plus 5 mm for the errors, 0.03 for the IoU.
+/// quarter plus 5 mm for the errors, 0.05 for the IoU. The kill lands at a different step each
+/// run and the robot's path diverges from there, so the map at the last step differs by chance:
+/// five runs with localization killed gave IoU 0.615–0.660 against 0.658 unkilled (the errors
+/// stayed within 7%). A restart that starts afresh instead of resuming fails the pose check.
 fn assert_close_to_unkilled(killed: &Summary, role: Role) {
     let reference = unkilled();
     let rmse = |s: &Summary| s.localization_rmse_m.expect("a pose RMSE");
@@ -91,7 +94,7 @@ fn assert_close_to_unkilled(killed: &Summary, role: Role) {
     assert_eq!(killed.ticks, reference.ticks, "{report}");
     assert!(close(rmse(killed), rmse(reference)), "{report}");
     assert!(close(landmarks(killed), landmarks(reference)), "{report}");
-    assert!(iou(killed) >= iou(reference) - 0.03, "{report}");
+    assert!(iou(killed) >= iou(reference) - 0.05, "{report}");
 }
 
 #[test]
