@@ -92,25 +92,7 @@ impl Replay {
 
 impl Drop for Replay {
     fn drop(&mut self) {
-        use nix::sys::signal::{Signal, kill};
-        use nix::unistd::Pid;
-        if let Some(mut child) = self.child.take() {
-            let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGINT);
-            let deadline = Instant::now() + Duration::from_secs(15);
-            while child.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-        let leftovers = processes_of(&self.namespace);
-        for pid in &leftovers {
-            let _ = kill(Pid::from_raw(*pid as i32), Signal::SIGKILL);
-        }
-        if !leftovers.is_empty() {
-            std::thread::sleep(Duration::from_millis(200));
-            mole_runtime::cleanup_dead_nodes();
-        }
+        stop_and_clean(self.child.take(), &self.namespace);
     }
 }
 

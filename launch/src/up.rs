@@ -1027,6 +1027,6 @@ mod tests {
             .expect("the clock runs longer than two hang timeouts");
         watch.last_heard.insert("sensing".into(), long_ago);
         watch.restarted("sensing");
-        assert!(watch.last_heard["sensing"].elapsed() < HANG_TIMEOUT);
+        assert!(watch.last_heard["sensing"] > long_ago);
     }
 }

@@ -184,27 +184,32 @@ impl Stack {
 
 impl Drop for Stack {
     fn drop(&mut self) {
-        use nix::sys::signal::{Signal, kill};
-        use nix::unistd::Pid;
-        if let Some(mut child) = self.child.take() {
-            // Ask nicely first (the launcher stops its children in order), then insist.
-            let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGINT);
-            let deadline = Instant::now() + Duration::from_secs(15);
-            while child.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            let _ = child.kill();
-            let _ = child.wait();
+        stop_and_clean(self.child.take(), &self.namespace);
+    }
+}
+
+/// Stops a launcher (`mole up`, `mole replay`) however a test ends: SIGINT first (it stops its
+/// children in order), SIGKILL after 15 s; then kills whatever of `namespace` is left and cleans
+/// the dead nodes' resources.
+pub fn stop_and_clean(child: Option<std::process::Child>, namespace: &str) {
+    use nix::sys::signal::{Signal, kill};
+    use nix::unistd::Pid;
+    if let Some(mut child) = child {
+        let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGINT);
+        let deadline = Instant::now() + Duration::from_secs(15);
+        while child.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(50));
         }
-        let leftovers = processes_of(&self.namespace);
-        for pid in &leftovers {
-            let _ = kill(Pid::from_raw(*pid as i32), Signal::SIGKILL);
-        }
-        if !leftovers.is_empty() {
-            std::thread::sleep(Duration::from_millis(200));
-            mole_runtime::cleanup_dead_nodes();
-        }
-        let _ = std::fs::remove_dir_all(&self.out);
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+    let leftovers = processes_of(namespace);
+    for pid in &leftovers {
+        let _ = kill(Pid::from_raw(*pid as i32), Signal::SIGKILL);
+    }
+    if !leftovers.is_empty() {
+        std::thread::sleep(Duration::from_millis(200));
+        mole_runtime::cleanup_dead_nodes();
     }
 }
 
