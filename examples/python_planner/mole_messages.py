@@ -767,79 +767,79 @@ class Topic(NamedTuple):
 
 
 WORLD_MAP = Topic(
-    "world/map", WorldMap, history=1, buffer=2, max_publishers=2, max_subscribers=8
+    "world/map", WorldMap, history=1, buffer=2, max_publishers=2, max_subscribers=16
 )
 
 WORLD_TRUTH = Topic(
-    "world/truth", Truth, history=1, buffer=64, max_publishers=2, max_subscribers=8
+    "world/truth", Truth, history=1, buffer=64, max_publishers=2, max_subscribers=16
 )
 
 SENSING_SCAN = Topic(
-    "sensing/scan", Scan, history=1, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/scan", Scan, history=1, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 SENSING_TACTILE = Topic(
-    "sensing/tactile", Tactile, history=1, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/tactile", Tactile, history=1, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 SENSING_ODOM = Topic(
-    "sensing/odom", Odom, history=1, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/odom", Odom, history=1, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 SENSING_BEACONS = Topic(
-    "sensing/beacons", Beacons, history=1, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/beacons", Beacons, history=1, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 SENSING_FIX = Topic(
-    "sensing/fix", Fix, history=1, buffer=16, max_publishers=2, max_subscribers=8
+    "sensing/fix", Fix, history=1, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 LOCALIZATION_POSE = Topic(
-    "localization/pose", Pose, history=1, buffer=64, max_publishers=2, max_subscribers=8
+    "localization/pose", Pose, history=1, buffer=64, max_publishers=2, max_subscribers=16
 )
 
 LOCALIZATION_PARTICLES = Topic(
-    "localization/particles", Particles, history=0, buffer=2, max_publishers=2, max_subscribers=8
+    "localization/particles", Particles, history=0, buffer=2, max_publishers=2, max_subscribers=16
 )
 
 LOCALIZATION_LANDMARKS = Topic(
-    "localization/landmarks", Landmarks, history=0, buffer=4, max_publishers=2, max_subscribers=8
+    "localization/landmarks", Landmarks, history=0, buffer=4, max_publishers=2, max_subscribers=16
 )
 
 LOCALIZATION_TRAJECTORY = Topic(
-    "localization/trajectory", Trajectory, history=0, buffer=2, max_publishers=2, max_subscribers=8
+    "localization/trajectory", Trajectory, history=0, buffer=2, max_publishers=2, max_subscribers=16
 )
 
 MAPPING_GRID = Topic(
-    "mapping/grid", Grid, history=1, buffer=4, max_publishers=2, max_subscribers=8
+    "mapping/grid", Grid, history=1, buffer=4, max_publishers=2, max_subscribers=16
 )
 
 MAPPING_CONTACT = Topic(
-    "mapping/contact", Grid, history=1, buffer=4, max_publishers=2, max_subscribers=8
+    "mapping/contact", Grid, history=1, buffer=4, max_publishers=2, max_subscribers=16
 )
 
 PLANNING_CMD = Topic(
-    "planning/cmd", Cmd, history=1, buffer=16, max_publishers=2, max_subscribers=8
+    "planning/cmd", Cmd, history=1, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 PLANNING_STATUS = Topic(
-    "planning/status", PlanStatus, history=0, buffer=4, max_publishers=2, max_subscribers=8
+    "planning/status", PlanStatus, history=0, buffer=4, max_publishers=2, max_subscribers=16
 )
 
 STACK_TICK = Topic(
-    "stack/tick", Tick, history=0, buffer=16, max_publishers=2, max_subscribers=8
+    "stack/tick", Tick, history=0, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 STACK_STATS = Topic(
-    "stack/stats", Stats, history=0, buffer=64, max_publishers=32, max_subscribers=8
+    "stack/stats", Stats, history=0, buffer=64, max_publishers=32, max_subscribers=16
 )
 
 MONITOR_STATUS = Topic(
-    "monitor/status", RunStatus, history=1, buffer=4, max_publishers=2, max_subscribers=8
+    "monitor/status", RunStatus, history=1, buffer=4, max_publishers=2, max_subscribers=16
 )
 
 STACK_PROCESSES = Topic(
-    "stack/processes", Processes, history=1, buffer=4, max_publishers=2, max_subscribers=8
+    "stack/processes", Processes, history=1, buffer=4, max_publishers=2, max_subscribers=16
 )
 
 TOPICS = (

@@ -119,7 +119,8 @@ impl Default for StackSpec {
 /// One `[[process]]` table.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProcessSpec {
-    /// The role's name, one of the graph's ([`mole_types::GRAPH`]); also names the log file.
+    /// The role's name, one of the graph's ([`mole_types::GRAPH`]) or an extra observer
+    /// (`observer-<name>`); also names the log file.
     pub role: String,
     /// Program: a bare name (next to `mole`, then `PATH`) or a path.
     pub command: String,
@@ -293,11 +294,13 @@ pub fn parse_launch_file(text: &str, path: &Path) -> Result<LaunchFile, LaunchEr
     let mut processes = Vec::with_capacity(raw.process.len());
     for (i, p) in raw.process.iter().enumerate() {
         let role = p.role.get_ref();
-        if let Err(e) = role.parse::<Role>() {
+        if let Err(e) = role.parse::<Role>()
+            && !is_extra_observer(role)
+        {
             return Err(invalid(
                 Some(p.role.span()),
                 format!("process[{i}].role"),
-                e.to_string(),
+                format!("{e}, or observer-<name> (an extra observer)"),
             ));
         }
         if let Some(first) = raw.process[..i].iter().find(|q| q.role.get_ref() == role) {
@@ -553,6 +556,18 @@ fn is_workspace_root(dir: &Path) -> bool {
         || std::fs::read_to_string(dir.join("Cargo.toml"))
             .map(|t| t.lines().any(|l| l.trim() == "[workspace]"))
             .unwrap_or(false)
+}
+
+/// A role outside the graph that a launch file may add: `observer-<name>` (lower-case letters,
+/// digits, `-`), a process that only reads the stack (`mole-observer`, a viewer). Nothing
+/// depends on it and it stops last.
+fn is_extra_observer(role: &str) -> bool {
+    role.strip_prefix("observer-").is_some_and(|name| {
+        !name.is_empty()
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'-')
+    })
 }
 
 #[cfg(test)]

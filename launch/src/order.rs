@@ -48,7 +48,7 @@ pub fn start_order(processes: &[ProcessSpec]) -> Result<Vec<usize>, LaunchError>
 
 /// The graph's stop order ([`mole_types::RoleSpec::stop_rank`]): the world first, so nothing
 /// new is produced, the monitor last, so it can still write its files. Returns indices into
-/// `processes`; a role the graph does not have (a launch file cannot name one) stops last.
+/// `processes`; a role the graph does not have (an extra observer) stops last.
 pub fn stop_order(processes: &[ProcessSpec]) -> Vec<usize> {
     let mut order: Vec<usize> = (0..processes.len()).collect();
     order.sort_by_key(|&i| graph::spec(&processes[i].role).map_or(u8::MAX, |s| s.stop_rank));

@@ -28,6 +28,7 @@ env_vars! {
     LOCAL_PLANNER = "MOLE_LOCAL_PLANNER": "the local planner that follows frontier paths (planning)";
     GOAL = "MOLE_GOAL": "a goal `X,Y` in metres that overrides the scenario's (planning)";
     ESTIMATOR = "MOLE_ESTIMATOR": "the estimator (localization, monitor)";
+    PARTICLES = "MOLE_PARTICLES": "the particle filter's particle count, 1 to 1,000,000 (localization)";
     TOUCH_THRESHOLD = "MOLE_TOUCH_THRESHOLD": "the force (N) above which a tactile reading is a touch (mapping)";
     OUT = "MOLE_OUT": "where summary.json and map.png go (monitor)";
     TAKEOVER = "MOLE_TAKEOVER": "start from the last output of the process this one replaces (a swap)";

@@ -34,16 +34,17 @@ impl<M> core::fmt::Debug for Topic<M> {
 }
 
 impl<M> Topic<M> {
-    /// A topic with the default service settings (history 0, buffer 16, 2 publishers, 8
-    /// subscribers). The stack's topics are the constants below; tools (benchmarks) may define
-    /// their own.
+    /// A topic with the default service settings (history 0, buffer 16, 2 publishers, 16
+    /// subscribers: the stack's own, a swap's replacement, a recorder and up to 8 observers
+    /// such as `mole-observer`). The stack's topics are the constants below; tools (benchmarks)
+    /// may define their own.
     pub const fn new(name: &'static str) -> Self {
         Self {
             name,
             history: 0,
             buffer: 16,
             max_publishers: 2,
-            max_subscribers: 8,
+            max_subscribers: 16,
             _message: PhantomData,
         }
     }

@@ -206,10 +206,40 @@ fn empty_command_and_bad_role() {
     assert_eq!(
         msg,
         "launch/stacks/x.toml:16:8: field `process[1].role`: unknown role `plan ning`, expected \
-         one of: world, sensing, localization, mapping, planning, monitor"
+         one of: world, sensing, localization, mapping, planning, monitor, or observer-<name> \
+         (an extra observer)"
     );
-    let msg = err(&VALID.replace("role = \"planning\"", "role = \"../x\""));
-    assert!(msg.contains("unknown role `../x`"), "{msg}");
+    for bad in [
+        "../x",
+        "observer-",
+        "observer-../x",
+        "observer-X",
+        "observer",
+    ] {
+        let msg = err(&VALID.replace("role = \"planning\"", &format!("role = \"{bad}\"")));
+        assert!(msg.contains(&format!("unknown role `{bad}`")), "{msg}");
+    }
+}
+
+/// A launch file may add observers (`observer-<name>`) beside the graph's roles; they stop last.
+#[test]
+fn extra_observers_are_accepted_and_stop_last() {
+    let text = format!(
+        "{VALID}\n[[process]]\nrole = \"observer-1\"\ncommand = \"mole-observer\"\n\
+         \n[[process]]\nrole = \"observer-a-2\"\ncommand = \"mole-observer\"\n"
+    );
+    let file = parse(&text).unwrap();
+    let roles: Vec<&str> = file.processes.iter().map(|p| p.role.as_str()).collect();
+    assert_eq!(
+        roles,
+        ["sensing", "planning", "world", "observer-1", "observer-a-2"]
+    );
+    let stops = crate::order::stop_order(&file.processes);
+    let last: Vec<&str> = stops[3..]
+        .iter()
+        .map(|&i| file.processes[i].role.as_str())
+        .collect();
+    assert_eq!(last, ["observer-1", "observer-a-2"]);
 }
 
 #[test]

@@ -13,11 +13,16 @@
 //!
 //! Every sample is kept (no filtering); send and receive times are CLOCK_MONOTONIC on the same
 //! machine. This crate is, with mole-runtime, the one place that names iceoryx2 types.
+//!
+//! It also measures how the whole stack's cost grows (`scripts/cost-growth.sh`): `mole-observer`
+//! ([`observer`]) reads every topic, `mole-plot` ([`cost`]) gathers the points and draws them.
 
+pub mod cost;
 mod driver;
 mod floor;
 mod link;
 pub mod messages;
+pub mod observer;
 mod probe;
 mod report;
 mod roles;

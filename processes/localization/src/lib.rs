@@ -238,13 +238,26 @@ pub fn build_estimator(
 /// `landmarks` (mean and 2×2 covariance, uncorrelated with the pose and with each other: the
 /// message carries no cross-covariances). Landmarks that are not finite and positive definite
 /// are skipped and counted as ignored.
-/// [`resume`] from `pose` when there is one (a swap or a restart), else [`build_estimator`].
+/// [`resume`] from `pose` when there is one (a swap or a restart), else [`build_estimator`]; a
+/// particle filter runs `particles` particles (1..=[`pf::MAX_FILTER_PARTICLES`]).
 pub fn start_estimator(
     kind: EstimatorKind,
     map: &WorldMap,
     pose: Option<&Pose>,
     landmarks: Option<&Landmarks>,
+    particles: usize,
 ) -> Result<Box<dyn Estimator>, LocalizationError> {
+    if kind == EstimatorKind::Pf {
+        let config = PfConfig {
+            n_particles: particles,
+            ..PfConfig::default()
+        };
+        let pf = match pose {
+            Some(pose) => ParticleFilter::from_map_with(&starting_at(map, pose), config),
+            None => ParticleFilter::from_map_with(map, config),
+        };
+        return Ok(Box::new(pf));
+    }
     match pose {
         Some(pose) => resume(kind, map, pose, landmarks),
         None => build_estimator(kind, map),
@@ -330,5 +343,20 @@ mod tests {
             assert_eq!(est.write_landmarks(&mut landmarks), kind.is_slam());
         }
         assert_eq!(particles.n_particles as usize, pf::DEFAULT_PARTICLES);
+    }
+
+    /// A particle filter started fresh or after a swap runs the particle count it is given.
+    #[test]
+    fn the_particle_filter_runs_the_count_it_is_given() {
+        let mut map = test_support::zeroed_map();
+        (map.arena_width, map.arena_height) = (4.0, 3.0);
+        let mut pose: Box<Pose> = bytemuck::zeroed_box();
+        (pose.x, pose.y) = (2.0, 1.5);
+        let mut particles: Box<Particles> = bytemuck::zeroed_box();
+        for from in [None, Some(&*pose)] {
+            let est = start_estimator(EstimatorKind::Pf, &map, from, None, 300).unwrap();
+            assert!(est.write_particles(&mut particles));
+            assert_eq!(particles.n_particles, 300, "resumed: {}", from.is_some());
+        }
     }
 }

@@ -8,7 +8,7 @@
 
 use clap::Parser;
 use mole_localization::slam::{PEER_LANDMARKS, PeerArgs, PeerFusion};
-use mole_localization::{EstimatorKind, Readings, odometry_over_gap, start_estimator};
+use mole_localization::{EstimatorKind, Readings, odometry_over_gap, pf, start_estimator};
 use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule, now_ns};
 use mole_types::{env, topics};
 use std::process::ExitCode;
@@ -27,12 +27,26 @@ struct Args {
     common: CommonArgs,
     #[arg(long, env = env::ESTIMATOR, default_value_t = EstimatorKind::Ekf)]
     estimator: EstimatorKind,
+    /// The particle filter's particle count (--estimator pf); above 16,384 the published cloud
+    /// is an evenly strided subset of 16,384.
+    #[arg(long, env = env::PARTICLES, default_value_t = pf::DEFAULT_PARTICLES,
+          value_parser = particle_count)]
+    particles: usize,
     #[command(flatten)]
     peers: PeerArgs,
 }
 
 fn main() -> ExitCode {
     mole_runtime::exit_code(run(&Args::parse()))
+}
+
+/// `--particles`: a whole number from 1 to [`pf::MAX_FILTER_PARTICLES`].
+fn particle_count(text: &str) -> Result<usize, String> {
+    let max = pf::MAX_FILTER_PARTICLES;
+    match text.trim().parse::<usize>() {
+        Ok(n) if (1..=max).contains(&n) => Ok(n),
+        _ => Err(format!("`{text}` is not a particle count from 1 to {max}")),
+    }
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
@@ -70,6 +84,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                 start.map,
                 pose_was.as_deref(),
                 landmarks_were.as_deref(),
+                args.particles,
             )?)
         },
         |estimator, step| {
@@ -106,4 +121,23 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     )?;
     peer.inspect(|peer| fusion.log_totals(peer));
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--particles` takes 1 to 1,000,000 and refuses anything else, saying what it expects.
+    #[test]
+    fn particle_counts_outside_the_range_are_refused() {
+        assert_eq!(particle_count("1"), Ok(1));
+        assert_eq!(particle_count("1000000"), Ok(pf::MAX_FILTER_PARTICLES));
+        for bad in ["0", "1000001", "-5", "10k", ""] {
+            let e = particle_count(bad).unwrap_err();
+            assert!(e.contains("from 1 to 1000000"), "{bad}: {e}");
+        }
+        let e = Args::try_parse_from(["mole-localization", "--particles", "0"]).unwrap_err();
+        assert_eq!(e.exit_code(), 2);
+        assert!(e.to_string().contains("--particles"), "{e}");
+    }
 }

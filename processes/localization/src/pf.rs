@@ -21,6 +21,10 @@ use rand_distr::StandardNormal;
 
 /// Default particle count J.
 pub const DEFAULT_PARTICLES: usize = 10_000;
+/// The most particles a filter runs (`--particles`); more than the message holds
+/// ([`MAX_PARTICLES`]): what is published is then a subset ([`ParticleFilter::len`] vs the
+/// message's `n_particles`).
+pub const MAX_FILTER_PARTICLES: usize = 1_000_000;
 /// Default resampling threshold: resample when N_eff < threshold · J.
 pub const DEFAULT_RESAMPLE_THRESHOLD: f64 = 0.5;
 /// Initial position σ (m) around the start pose, as for the EKF.
@@ -108,7 +112,7 @@ pub fn low_variance_resample(weights: &[f64], r: f64, out: &mut [usize]) {
 /// Tuning of a [`ParticleFilter`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PfConfig {
-    /// J, the number of particles (1..=`MAX_PARTICLES`).
+    /// J, the number of particles (1..=[`MAX_FILTER_PARTICLES`]).
     pub n_particles: usize,
     /// Resample when N_eff < `resample_threshold` · J.
     pub resample_threshold: f64,
@@ -164,7 +168,7 @@ fn gauss(rng: &mut ChaCha8Rng) -> f64 {
 }
 
 impl ParticleFilter {
-    /// J = `config.n_particles` (clamped to 1..=`MAX_PARTICLES`) particles drawn around
+    /// J = `config.n_particles` (clamped to 1..=[`MAX_FILTER_PARTICLES`]) particles drawn around
     /// `initial`, from the ChaCha stream of `seed`. Non-finite pose values become 0.
     pub fn new(
         initial: Pose2,
@@ -173,7 +177,7 @@ impl ParticleFilter {
         beacons: &[BeaconSite],
         seed: u64,
     ) -> Self {
-        let n = config.n_particles.clamp(1, MAX_PARTICLES);
+        let n = config.n_particles.clamp(1, MAX_FILTER_PARTICLES);
         let fin = |v: f64, d: f64| if v.is_finite() { v } else { d };
         let sxy = fin(config.initial_std_xy, INITIAL_STD_XY).abs();
         let sth = fin(config.initial_std_theta, INITIAL_STD_THETA).abs();
@@ -475,15 +479,33 @@ impl Estimator for ParticleFilter {
         self.ignored
     }
 
-    /// Fills `n_particles` and the particles (f32, normalised weights), never the header.
+    /// Fills `n_particles` and the particles (f32, normalised weights), never the header. A
+    /// filter of more than [`MAX_PARTICLES`] writes every (J / `MAX_PARTICLES`)-th particle, an
+    /// evenly strided subset of `MAX_PARTICLES` whose weights are normalised again: the message
+    /// is a picture of the cloud for a viewer, not the filter's state, which nothing restores
+    /// from it (a restart draws a fresh set around the last pose).
     fn write_particles(&self, out: &mut Particles) -> bool {
-        let n = self.x.len().min(MAX_PARTICLES);
-        for (j, p) in out.particles[..n].iter_mut().enumerate() {
+        let total = self.x.len();
+        let n = total.min(MAX_PARTICLES);
+        // Particle i of the message is particle ⌊i·J/n⌋ of the filter: every one when J ≤ n.
+        let pick = |i: usize| i * total / n;
+        let picked_weight: f64 = (0..n).map(|i| self.w[pick(i)]).sum();
+        let scale = if picked_weight > 0.0 {
+            1.0 / picked_weight
+        } else {
+            0.0
+        };
+        for (i, p) in out.particles[..n].iter_mut().enumerate() {
+            let j = pick(i);
             *p = Particle {
                 x: self.x[j] as f32,
                 y: self.y[j] as f32,
                 theta: self.theta[j] as f32,
-                w: self.w[j] as f32,
+                w: if scale > 0.0 {
+                    (self.w[j] * scale) as f32
+                } else {
+                    1.0 / n as f32
+                },
             };
         }
         out.n_particles = n as u32;
@@ -647,6 +669,40 @@ mod tests {
         assert_eq!(mole_types::Message::validate(&*out), Ok(()));
     }
 
+    /// A filter larger than the message publishes an evenly strided subset that spans the whole
+    /// set, with the filter's relative weights, normalised again.
+    #[test]
+    fn a_filter_larger_than_the_message_writes_a_strided_subset() {
+        let total = 3 * MAX_PARTICLES + 5;
+        let mut pf = pf(total);
+        let raw: Vec<f64> = (0..total).map(|j| (j % 7 + 1) as f64).collect();
+        let sum: f64 = raw.iter().sum();
+        pf.w = raw.iter().map(|w| w / sum).collect();
+        let mut out: Box<Particles> = bytemuck::zeroed_box();
+        assert!(pf.write_particles(&mut out));
+        assert_eq!(out.n_particles as usize, MAX_PARTICLES);
+        assert_eq!(mole_types::Message::validate(&*out), Ok(()));
+        let written = out.particles();
+        let picked_sum: f64 = (0..MAX_PARTICLES)
+            .map(|i| raw[i * total / MAX_PARTICLES])
+            .sum();
+        // The last one comes from the end of the set, not from its first MAX_PARTICLES.
+        for i in [0, 1, 2, MAX_PARTICLES / 2, MAX_PARTICLES - 1] {
+            let j = i * total / MAX_PARTICLES;
+            let p = pf.particle(j).unwrap();
+            assert_eq!(written[i].x, p.x as f32, "particle {i} is the filter's {j}");
+            assert_eq!(written[i].y, p.y as f32);
+            assert_eq!(written[i].theta, p.theta as f32);
+            assert_relative_eq!(
+                f64::from(written[i].w),
+                raw[j] / picked_sum,
+                max_relative = 1e-5
+            );
+        }
+        let weight: f64 = written.iter().map(|p| f64::from(p.w)).sum();
+        assert_relative_eq!(weight, 1.0, epsilon = 1e-3);
+    }
+
     #[test]
     fn particle_count_is_clamped_and_the_seed_reproduces() {
         let mut cfg = PfConfig {
@@ -658,7 +714,7 @@ mod tests {
         assert_eq!(p.len(), 1);
         cfg.n_particles = usize::MAX;
         let p = ParticleFilter::new(Pose2::default(), cfg, noise, &[], 1);
-        assert_eq!(p.len(), MAX_PARTICLES);
+        assert_eq!(p.len(), MAX_FILTER_PARTICLES);
         let (mut a, mut b) = (pf(100), pf(100));
         a.predict_with(0.5, 0.3, 0.1).unwrap();
         b.predict_with(0.5, 0.3, 0.1).unwrap();
