@@ -329,15 +329,6 @@ fn the_stacks_shared_memory_belongs_to_its_user_alone() {
     }
 }
 
-/// A temporary directory, removed on drop.
-struct TempDir(std::path::PathBuf);
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// Runs this test executable's probe as user and group `id` against `namespace` and `files`,
 /// and returns what it printed. The executable is copied where any user may run it (the build
 /// directory may be closed to others).

@@ -14,23 +14,6 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(300);
 /// robot first presses on an obstacle hard enough to mark the grids at tick 2,080.
 const TICKS: &str = "3000";
 
-/// A directory of the test's own in the temp directory, removed whatever happens.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(test: &str) -> TempDir {
-        let dir = std::env::temp_dir().join(format!("mole-{}", unique_namespace(test)));
-        std::fs::create_dir_all(&dir).expect("temp dir");
-        TempDir(dir)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// A running `mole replay`; on drop (a failed test included) it and every process of its
 /// namespace are stopped.
 struct Replay {

@@ -654,6 +654,41 @@ class Processes(ctypes.Structure):
 _check(Processes, 808, 8, [0, 32, 36, 40])
 
 
+class Goal(ctypes.Structure):
+    """`mole.Goal.v1`: 56 bytes, alignment 8."""
+
+    _fields_ = [
+        ("header", Header),
+        ("x", ctypes.c_double),
+        ("y", ctypes.c_double),
+        ("tolerance", ctypes.c_double),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.Goal.v1"
+
+
+_check(Goal, 56, 8, [0, 32, 40, 48])
+
+
+class Pace(ctypes.Structure):
+    """`mole.Pace.v1`: 40 bytes, alignment 8."""
+
+    _fields_ = [
+        ("header", Header),
+        ("op", ctypes.c_uint32),
+        ("steps", ctypes.c_uint32),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.Pace.v1"
+
+
+_check(Pace, 40, 8, [0, 32, 36])
+
+
 class ControlRequest(ctypes.Structure):
     """`mole.ControlRequest.v1`: 3144 bytes, alignment 8."""
 
@@ -740,6 +775,10 @@ PROCESS_RUNNING = 1
 PROCESS_RESTARTING = 2
 PROCESS_EXITED = 3
 PROCESS_FAILED = 4
+PACE_RUN = 1
+PACE_PAUSE = 2
+PACE_STEP = 3
+PACE_MAX_STEPS = 100000
 END_TICKS = 1
 END_GOAL_REACHED = 2
 END_STOPPED = 3
@@ -842,11 +881,19 @@ STACK_PROCESSES = Topic(
     "stack/processes", Processes, history=1, buffer=4, max_publishers=2, max_subscribers=16
 )
 
+OPERATOR_GOAL = Topic(
+    "operator/goal", Goal, history=1, buffer=16, max_publishers=2, max_subscribers=16
+)
+
+OPERATOR_PACE = Topic(
+    "operator/pace", Pace, history=1, buffer=16, max_publishers=2, max_subscribers=16
+)
+
 TOPICS = (
     WORLD_MAP, WORLD_TRUTH, SENSING_SCAN, SENSING_TACTILE, SENSING_ODOM, SENSING_BEACONS,
     SENSING_FIX, LOCALIZATION_POSE, LOCALIZATION_PARTICLES, LOCALIZATION_LANDMARKS,
     LOCALIZATION_TRAJECTORY, MAPPING_GRID, MAPPING_CONTACT, PLANNING_CMD, PLANNING_STATUS,
-    STACK_TICK, STACK_STATS, MONITOR_STATUS, STACK_PROCESSES,
+    STACK_TICK, STACK_STATS, MONITOR_STATUS, STACK_PROCESSES, OPERATOR_GOAL, OPERATOR_PACE,
 )
 
 

@@ -17,11 +17,13 @@ pub mod launch_file;
 pub mod order;
 pub mod record;
 pub mod replay;
+pub mod sidecar;
 pub mod stats;
 pub mod supervisor;
 pub mod swap;
 pub mod top;
 pub mod up;
+pub mod view;
 
 pub use error::LaunchError;
 pub use launch_file::{

@@ -9,6 +9,7 @@ use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
 use mole_launch::top::{TopArgs, top};
 use mole_launch::up::{UpArgs, up};
+use mole_launch::view::{ViewArgs, view};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -40,6 +41,9 @@ enum Command {
     /// Run a recorded stack again with its recorded roles (default world,sensing) played back
     /// from the file; --check compares the live roles' outputs with the recording's.
     Replay(ReplayArgs),
+    /// Serve a live view of a running stack (or of a recording FILE, with a timeline) in a
+    /// browser, until Ctrl-C or the stack ends.
+    View(ViewArgs),
     /// Describe a recording: duration, ticks, topics with counts and rates, metadata.
     Info(InfoArgs),
     /// Write a recording again with Foxglove's well-known schemas (JSON), so Foxglove or
@@ -56,7 +60,7 @@ enum BenchCommand {
     /// socket and TCP, payloads from 64 B to 4 MiB.
     Ipc(BenchIpcArgs),
     /// Run the full stack and report steps/s, loop latency, per-hop latency, CPU and memory.
-    Stack(BenchStackArgs),
+    Stack(Box<BenchStackArgs>),
 }
 
 fn main() -> ExitCode {
@@ -70,6 +74,7 @@ fn main() -> ExitCode {
         Command::Top(args) => top(&args),
         Command::Record(args) => record(&args),
         Command::Replay(args) => replay(&args),
+        Command::View(args) => view(&args),
         Command::Info(args) => info(&args),
         Command::Export(args) => export(&args),
         Command::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),

@@ -221,6 +221,7 @@ pub fn replay(args: &ReplayArgs) -> Result<(), Failure> {
             true => EVERY_GRID.iter().map(|s| s.to_string()).collect(),
             false => Vec::new(),
         },
+        view: Default::default(),
         stand_in: Some(Box::new(StandIn {
             cast: cast.clone(),
             args: player_args,

@@ -10,6 +10,7 @@ use crate::keeper::Keeper;
 use crate::record::{RecordPlan, Recorder};
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
+use crate::view::{UpViewArgs, View, ViewPlan};
 use crate::{
     ChildSpec, ExitStatus, LaunchFile, RestartWhen, Supervisor, SupervisorEvent, resolve_program,
     start_order, stop_order,
@@ -109,6 +110,8 @@ pub struct UpArgs {
     /// mapping/grid=10 and mapping/contact=10; N = 1 writes every sample).
     #[arg(long = "record-every", value_name = "TOPIC=N", requires = "record")]
     pub record_every: Vec<String>,
+    #[command(flatten)]
+    pub view: UpViewArgs,
     /// `mole replay`: the player in the place of the roles it plays back.
     #[arg(skip)]
     pub stand_in: Option<Box<crate::replay::StandIn>>,
@@ -237,7 +240,8 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
         )?),
         None => None,
     };
-    let mut stack = start(args, plan, recording)?;
+    let viewing = args.view.plan()?;
+    let mut stack = start(args, plan, recording, viewing)?;
     let end = supervise(&mut stack);
     finish(stack, end)
 }
@@ -249,6 +253,8 @@ struct Ports {
     status: Subscriber<RunStatus>,
     processes: Publisher<Processes>,
     control: ControlServer,
+    /// The operator's pace (operator/pace): a run it holds is not stalled.
+    pace: Subscriber<mole_types::Pace>,
 }
 
 /// What supervision keeps track of.
@@ -308,15 +314,22 @@ struct Stack<'a> {
     supervisor: Supervisor,
     /// `--record`: the recorder beside the stack.
     recorder: Option<Recorder>,
+    /// `--view`: the view beside the stack.
+    view: Option<View>,
     watch: Watch,
     interrupted: Arc<AtomicBool>,
     progress: ProgressBar,
     started: Instant,
 }
 
-/// Opens the launcher's ports, starts the recorder (if any) and every process once those it
-/// depends on are ready.
-fn start(args: &UpArgs, plan: Plan, recording: Option<RecordPlan>) -> Result<Stack<'_>, Failure> {
+/// Opens the launcher's ports, starts the recorder and the view (if any) and every process once
+/// those it depends on are ready.
+fn start(
+    args: &UpArgs,
+    plan: Plan,
+    recording: Option<RecordPlan>,
+    viewing: Option<ViewPlan>,
+) -> Result<Stack<'_>, Failure> {
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
@@ -327,6 +340,9 @@ fn start(args: &UpArgs, plan: Plan, recording: Option<RecordPlan>) -> Result<Sta
     let recorder = recording
         .map(|r| r.start(&plan.env, log_of(args, "recorder")))
         .transpose()?;
+    let view = viewing
+        .map(|v| v.start(&plan.env, log_of(args, "view")))
+        .transpose()?;
     let order = start_order(&plan.launch.processes).map_err(|e| Failure::input(e.to_string()))?;
     let mut stack = Stack {
         args,
@@ -334,6 +350,7 @@ fn start(args: &UpArgs, plan: Plan, recording: Option<RecordPlan>) -> Result<Sta
         keeper,
         supervisor: Supervisor::new(),
         recorder,
+        view,
         watch: Watch::new(),
         interrupted,
         progress: progress_bar(plan.ticks, args.quiet),
@@ -387,15 +404,17 @@ fn open_ports(common: &CommonArgs, interrupted: Arc<AtomicBool>) -> Result<Ports
             ctx.subscriber(topics::MONITOR_STATUS)?,
             ctx.publisher(topics::STACK_PROCESSES)?,
             ctx.control_server()?,
+            ctx.passive_subscriber(topics::OPERATOR_PACE)?,
         ))
     };
-    let (stats, status, processes, control) = open().map_err(|e| e.to_string())?;
+    let (stats, status, processes, control, pace) = open().map_err(|e| e.to_string())?;
     Ok(Ports {
         ctx,
         stats,
         status,
         processes,
         control,
+        pace,
     })
 }
 
@@ -413,6 +432,9 @@ fn supervise(stack: &mut Stack<'_>) -> RunEnd {
         restart_hung(stack);
         if let Some(recorder) = stack.recorder.as_mut() {
             recorder.check();
+        }
+        if let Some(view) = stack.view.as_mut() {
+            view.check();
         }
         if last_report.elapsed() >= Duration::from_secs(1) {
             last_report = Instant::now();
@@ -548,6 +570,16 @@ fn follow_progress(stack: &mut Stack<'_>) -> Option<RunEnd> {
         if status.header.tick != stack.watch.last_step.0 {
             stack.watch.last_step = (status.header.tick, Instant::now());
         }
+    }
+    // A run the operator holds (paused, or held after its steps) makes no step, and is no stall.
+    stack.ports.pace.drain(|_| {});
+    if stack
+        .ports
+        .pace
+        .latest()
+        .is_some_and(|p| p.op != mole_types::PACE_RUN)
+    {
+        stack.watch.last_step.1 = Instant::now();
     }
     let (step, since) = stack.watch.last_step;
     if stack.plan.mode != ClockMode::Lockstep
@@ -688,6 +720,7 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         keeper,
         mut supervisor,
         recorder,
+        view,
         watch,
         progress,
         started,
@@ -706,6 +739,9 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
     // After every role: the recorder reads their last samples before it finishes its file.
     if let Some(recorder) = recorder {
         recorder.stop(timeout);
+    }
+    if let Some(view) = view {
+        view.stop(timeout);
     }
     drop(ports);
     keeper.stop();

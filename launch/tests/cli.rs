@@ -31,8 +31,8 @@ fn help_lists_every_subcommand() {
     assert_eq!(
         listed_subcommands(&[]),
         [
-            "up", "swap", "stop", "status", "top", "record", "replay", "info", "export", "bench",
-            "help"
+            "up", "swap", "stop", "status", "top", "record", "replay", "view", "info", "export",
+            "bench", "help"
         ]
     );
     assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
@@ -44,6 +44,7 @@ fn help_lists_every_subcommand() {
         &["top"],
         &["record"],
         &["replay"],
+        &["view"],
         &["info"],
         &["export"],
         &["bench", "ipc"],

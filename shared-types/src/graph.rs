@@ -70,7 +70,7 @@ pub const GRAPH: &[RoleSpec] = &[
     RoleSpec {
         role: Role::World,
         program: "mole-world",
-        inputs: &[PLANNING_CMD.name],
+        inputs: &[PLANNING_CMD.name, OPERATOR_PACE.name],
         outputs: &[WORLD_MAP.name, WORLD_TRUTH.name, STACK_TICK.name],
         step_output: Some(WORLD_TRUTH.name),
         swap: Swap::Refused("its state is the run: a new world would start another one"),
@@ -141,6 +141,7 @@ pub const GRAPH: &[RoleSpec] = &[
             SENSING_SCAN.name,
             SENSING_TACTILE.name,
             MAPPING_GRID.name,
+            OPERATOR_GOAL.name,
         ],
         outputs: &[PLANNING_CMD.name, PLANNING_STATUS.name],
         step_output: Some(PLANNING_CMD.name),
@@ -272,7 +273,7 @@ mod tests {
     }
 
     /// Every topic the graph names is a topic of the table, and every topic but the launcher's
-    /// has one writer among the roles.
+    /// and the operator's has one writer among the roles.
     #[test]
     fn every_topic_named_is_a_topic_and_has_its_writer() {
         let known: Vec<&str> = all().iter().map(|(n, _)| *n).collect();
@@ -291,8 +292,13 @@ mod tests {
         }
         for topic in known {
             let writers = GRAPH.iter().filter(|r| r.outputs.contains(&topic)).count();
-            let launchers = [STACK_STATS.name, STACK_PROCESSES.name];
-            assert_eq!(writers, usize::from(!launchers.contains(&topic)), "{topic}");
+            let outside = [
+                STACK_STATS.name,
+                STACK_PROCESSES.name,
+                OPERATOR_GOAL.name,
+                OPERATOR_PACE.name,
+            ];
+            assert_eq!(writers, usize::from(!outside.contains(&topic)), "{topic}");
         }
     }
 

@@ -103,6 +103,8 @@ pub fn all() -> Vec<TypeLayout> {
         layout!(RunStatus, type_name::<RunStatus>();
             header, coverage, loop_p50_us, loop_p99_us, max_penetration_m, rmse_m, finished),
         layout!(Processes, type_name::<Processes>(); header, n_processes, _pad, processes),
+        layout!(Goal, type_name::<Goal>(); header, x, y, tolerance),
+        layout!(Pace, type_name::<Pace>(); header, op, steps),
         layout!(RobotSpec, type_name::<RobotSpec>(); radius, max_speed, max_omega, max_accel, max_alpha),
         layout!(SensorSpec, type_name::<SensorSpec>();
             lidar_beams, tactile_sensors, lidar_range_max, lidar_fov, lidar_range_std,
@@ -223,6 +225,10 @@ fn constants() -> Vec<(String, u64)> {
         PROCESS_RESTARTING,
         PROCESS_EXITED,
         PROCESS_FAILED,
+        PACE_RUN,
+        PACE_PAUSE,
+        PACE_STEP,
+        PACE_MAX_STEPS,
     ];
     all.extend(choice_codes("END", EndReason::NAMES, |i| {
         EndReason::ALL[i].code()
@@ -493,6 +499,8 @@ const _: () = {
     assert!(size_of::<RunStatus>() == 56);
     assert!(size_of::<ProcessStatus>() == 48);
     assert!(size_of::<Processes>() == 40 + 48 * MAX_PROCESSES);
+    assert!(size_of::<Goal>() == 56);
+    assert!(size_of::<Pace>() == 40);
     assert!(size_of::<ControlRequest>() == 72 + CONTROL_PATH_LEN + CONTROL_ARGV_LEN);
     assert!(size_of::<ControlResponse>() == 80 + CONTROL_TEXT_LEN);
     assert!(offset_of!(WorldMap, header) == 0);

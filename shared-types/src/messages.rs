@@ -889,6 +889,78 @@ impl Message for PlanStatus {
 }
 
 // ---------------------------------------------------------------------------------------------
+// operator/*
+// ---------------------------------------------------------------------------------------------
+
+/// `operator/goal`: where an operator (the view) wants a goal-seeking planner to go.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Goal.v1")]
+pub struct Goal {
+    pub header: Header,
+    /// Goal position (m), world frame.
+    pub x: f64,
+    pub y: f64,
+    /// How close counts as reached (m); 0 keeps the planner's current tolerance.
+    pub tolerance: f64,
+}
+
+impl Message for Goal {
+    fn header(&self) -> &Header {
+        &self.header
+    }
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+    fn validate(&self) -> Result<(), Invalid> {
+        all_finite("x/y/tolerance", &[self.x, self.y, self.tolerance])?;
+        if self.tolerance < 0.0 {
+            return Err(Invalid::OutOfRange("tolerance"));
+        }
+        Ok(())
+    }
+}
+
+/// `Pace::op`: run freely.
+pub const PACE_RUN: u32 = 1;
+/// `Pace::op`: hold the world before its next step.
+pub const PACE_PAUSE: u32 = 2;
+/// `Pace::op`: take `steps` more steps, then hold.
+pub const PACE_STEP: u32 = 3;
+/// Most steps one `PACE_STEP` may ask for.
+pub const PACE_MAX_STEPS: u32 = 100_000;
+
+/// `operator/pace`: pause, resume or single-step a lockstep run.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("mole.Pace.v1")]
+pub struct Pace {
+    pub header: Header,
+    /// PACE_RUN, PACE_PAUSE or PACE_STEP.
+    pub op: u32,
+    /// With PACE_STEP: how many steps (1..=PACE_MAX_STEPS); otherwise 0.
+    pub steps: u32,
+}
+
+impl Message for Pace {
+    fn header(&self) -> &Header {
+        &self.header
+    }
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+    fn validate(&self) -> Result<(), Invalid> {
+        match self.op {
+            PACE_RUN | PACE_PAUSE if self.steps == 0 => Ok(()),
+            PACE_RUN | PACE_PAUSE => Err(Invalid::OutOfRange("steps")),
+            PACE_STEP if (1..=PACE_MAX_STEPS).contains(&self.steps) => Ok(()),
+            PACE_STEP => Err(Invalid::OutOfRange("steps")),
+            _ => Err(Invalid::UnknownCode("op")),
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // stack/*
 // ---------------------------------------------------------------------------------------------
 
@@ -1129,6 +1201,12 @@ mod tests {
         assert_eq!(bytemuck::zeroed_box::<Tick>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<Stats>().validate(), Ok(()));
         assert_eq!(bytemuck::zeroed_box::<RunStatus>().validate(), Ok(()));
+        assert_eq!(bytemuck::zeroed_box::<Goal>().validate(), Ok(()));
+        // A zeroed pace has op 0, which is no operation.
+        assert_eq!(
+            bytemuck::zeroed_box::<Pace>().validate(),
+            Err(Invalid::UnknownCode("op"))
+        );
         // A zeroed grid has resolution 0, which is out of range.
         assert_eq!(
             bytemuck::zeroed_box::<Grid>().validate(),
@@ -1208,6 +1286,43 @@ mod tests {
         let mut truth: Truth = bytemuck::Zeroable::zeroed();
         truth.flags = 8;
         assert_eq!(truth.validate(), Err(Invalid::UnknownCode("flags")));
+    }
+
+    /// An operator's goal is a finite point with a tolerance of zero or more; a pace names a
+    /// known operation, and only a step carries a count, within its range.
+    #[test]
+    fn operator_messages_refuse_what_makes_no_sense() {
+        let mut goal: Goal = bytemuck::Zeroable::zeroed();
+        (goal.x, goal.y, goal.tolerance) = (3.0, 4.0, 0.25);
+        assert_eq!(goal.validate(), Ok(()));
+        goal.tolerance = -0.1;
+        assert_eq!(goal.validate(), Err(Invalid::OutOfRange("tolerance")));
+        goal.tolerance = 0.0;
+        goal.y = f64::INFINITY;
+        assert_eq!(goal.validate(), Err(Invalid::NotFinite("x/y/tolerance")));
+
+        let pace = |op, steps| Pace {
+            header: Header::default(),
+            op,
+            steps,
+        };
+        assert_eq!(pace(PACE_RUN, 0).validate(), Ok(()));
+        assert_eq!(pace(PACE_PAUSE, 0).validate(), Ok(()));
+        assert_eq!(pace(PACE_STEP, 1).validate(), Ok(()));
+        assert_eq!(pace(PACE_STEP, PACE_MAX_STEPS).validate(), Ok(()));
+        assert_eq!(
+            pace(PACE_STEP, 0).validate(),
+            Err(Invalid::OutOfRange("steps"))
+        );
+        assert_eq!(
+            pace(PACE_STEP, PACE_MAX_STEPS + 1).validate(),
+            Err(Invalid::OutOfRange("steps"))
+        );
+        assert_eq!(
+            pace(PACE_PAUSE, 5).validate(),
+            Err(Invalid::OutOfRange("steps"))
+        );
+        assert_eq!(pace(4, 0).validate(), Err(Invalid::UnknownCode("op")));
     }
 
     #[test]

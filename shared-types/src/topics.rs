@@ -119,6 +119,12 @@ topics! {
     STACK_STATS: Stats = Topic::new("stack/stats").buffer(64).max_publishers(32);
     MONITOR_STATUS: RunStatus = Topic::new("monitor/status").history(1).buffer(4);
     STACK_PROCESSES: Processes = Topic::new("stack/processes").history(1).buffer(4);
+    /// Where an operator (the view, a script) sends a goal-seeking planner; history 1: a
+    /// restarted planner picks up the current goal.
+    OPERATOR_GOAL: Goal = Topic::new("operator/goal").history(1);
+    /// An operator's pause, step or run of a lockstep world; history 1: a restarted world
+    /// picks up the current pace.
+    OPERATOR_PACE: Pace = Topic::new("operator/pace").history(1);
 }
 
 /// A request-response service: its name and the types of its requests and responses.

@@ -51,6 +51,24 @@ pub fn unique_namespace(test: &str) -> String {
     format!("t-{test}-{}-{nanos}", std::process::id())
 }
 
+/// A directory of the test's own in the temp directory, removed whatever happens.
+pub struct TempDir(pub PathBuf);
+
+impl TempDir {
+    /// A new, empty directory named after `test` and unique to this run.
+    pub fn new(test: &str) -> TempDir {
+        let dir = std::env::temp_dir().join(format!("mole-{}", unique_namespace(test)));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        TempDir(dir)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 /// iceoryx2's files: shared memory in /dev/shm and its node and service records in
 /// /tmp/iceoryx2, by path.
 pub fn shm_files() -> Vec<String> {
@@ -439,4 +457,65 @@ pub fn python_with_mcap() -> Result<String, String> {
         "no Python with the mcap package ({}); scripts/python-env.sh installs one",
         reasons.join("; ")
     ))
+}
+
+/// A context of the test's own in a running stack of clock `mode` (an operator, an observer).
+/// Its statistics are silenced: it is no role of the stack.
+pub fn join_stack(
+    namespace: &str,
+    role: &str,
+    mode: mole_runtime::ClockMode,
+) -> mole_runtime::Context {
+    let args = mole_runtime::CommonArgs {
+        namespace: namespace.to_string(),
+        mode,
+        rate_hz: 100.0,
+        seed: None,
+        takeover: false,
+        resume: None,
+    };
+    let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let mut ctx = mole_runtime::Context::with_shutdown_flag(role, &args, shutdown)
+        .unwrap_or_else(|e| panic!("{role} joins {namespace}: {e}"));
+    ctx.silence_stats();
+    ctx
+}
+
+impl Stack {
+    /// `mole up`'s stdout, line by line, from a thread that reads it to its end (so the
+    /// launcher never blocks on a full pipe); `None` when it was taken already.
+    pub fn stdout_lines(&mut self) -> Option<std::sync::mpsc::Receiver<String>> {
+        use std::io::BufRead;
+        let stdout = self.child.as_mut()?.stdout.take()?;
+        let (lines, received) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if lines.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Some(received)
+    }
+}
+
+/// The URL `mole up --view` or `mole view` printed (`view: URL`), read from `lines` within
+/// `timeout`.
+pub fn view_url(lines: &std::sync::mpsc::Receiver<String>, timeout: Duration) -> String {
+    let deadline = Instant::now() + timeout;
+    let mut seen = Vec::new();
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match lines.recv_timeout(left) {
+            Ok(line) => match line.strip_prefix("view: ") {
+                Some(url) => return url.trim().to_string(),
+                None => seen.push(line),
+            },
+            Err(_) => break,
+        }
+    }
+    panic!(
+        "no `view: URL` line within {timeout:?}; stdout was:\n{}",
+        seen.join("\n")
+    )
 }

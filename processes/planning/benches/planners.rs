@@ -5,7 +5,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use mole_planning::apf::{Apf, ApfConfig};
 use mole_planning::dwa::{Dwa, DwaConfig, DwaState, Sampling};
 use mole_planning::frontier::{FrontierConfig, FrontierSelector};
-use mole_planning::{DistanceField, RobotLimits};
+use mole_planning::{DistanceField, Planner, RobotLimits};
 use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid};
 use std::hint::black_box;
 
@@ -116,7 +116,7 @@ fn benches(c: &mut Criterion) {
     });
 
     let mut apf = Apf::new(limits(), ApfConfig::default(), [8.0, 8.0], 1);
-    apf.set_goal([8.0, 8.0]);
+    apf.set_goal([8.0, 8.0], None);
     let mut st = mole_types::Pose2::new(3.0, 3.0, 0.0);
     // Feed the grid once so the field is built.
     let input = mole_planning::PlannerInput {

@@ -263,18 +263,6 @@ impl Apf {
         self.oscillations
     }
 
-    /// Changes the goal and forgets the progress record.
-    pub fn set_goal(&mut self, goal: [f64; 2]) {
-        if goal != self.goal {
-            self.goal = goal;
-            self.best = f64::INFINITY;
-            self.n_flips = 0;
-            if self.phase == ApfPhase::Reached {
-                self.phase = ApfPhase::Seeking;
-            }
-        }
-    }
-
     /// The distance field the planner keeps of the grid's occupied cells.
     pub fn field(&self) -> &DistanceField {
         &self.field
@@ -494,6 +482,22 @@ impl Planner for Apf {
 
     fn target(&self) -> Option<[f64; 2]> {
         Some(self.goal)
+    }
+
+    /// Changes the goal (and the tolerance, if given) and forgets the progress record.
+    fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
+        if let Some(t) = tolerance.filter(|t| t.is_finite() && *t > 0.0) {
+            self.config.goal_tolerance = t;
+        }
+        if goal != self.goal {
+            self.goal = goal;
+            self.best = f64::INFINITY;
+            self.n_flips = 0;
+            if self.phase == ApfPhase::Reached {
+                self.phase = ApfPhase::Seeking;
+            }
+        }
+        true
     }
 
     fn write_status(&self, status: &mut PlanStatus) {

@@ -413,6 +413,10 @@ impl<P: Planner> Planner for BounceBack<P> {
         self.inner.target()
     }
 
+    fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
+        self.inner.set_goal(goal, tolerance)
+    }
+
     /// The wrapped planner's status with this layer's bounce count.
     fn write_status(&self, status: &mut mole_types::PlanStatus) {
         self.inner.write_status(status);

@@ -406,14 +406,6 @@ impl Dwa {
         self.goal
     }
 
-    /// Sets the goal (and the aim point of the critics); drops the global path.
-    pub fn set_goal(&mut self, goal: [f64; 2]) {
-        self.goal = goal;
-        self.aim = goal;
-        self.global.clear();
-        self.replan_requested = true;
-    }
-
     /// Where the goal and heading critics aim (the goal, or the carrot on the global path).
     pub fn aim(&self) -> [f64; 2] {
         self.aim
@@ -922,6 +914,19 @@ impl Planner for Dwa {
 
     fn target(&self) -> Option<[f64; 2]> {
         Some(self.goal)
+    }
+
+    /// Sets the goal (and the aim point of the critics, and the tolerance if given); drops the
+    /// global path.
+    fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
+        if let Some(t) = tolerance.filter(|t| t.is_finite() && *t > 0.0) {
+            self.config.goal_tolerance = t;
+        }
+        self.goal = goal;
+        self.aim = goal;
+        self.global.clear();
+        self.replan_requested = true;
+        true
     }
 
     fn write_status(&self, status: &mut PlanStatus) {

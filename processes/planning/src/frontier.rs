@@ -524,7 +524,7 @@ impl Planner for FrontierExplorer {
             let c = match self.local {
                 LocalPlanner::Dwa => self.dwa.track(input, carrot, self.follow.remaining()),
                 LocalPlanner::Apf => {
-                    self.apf.set_goal(carrot);
+                    self.apf.set_goal(carrot, None);
                     self.apf.step(input)
                 }
             };

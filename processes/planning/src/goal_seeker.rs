@@ -129,6 +129,11 @@ impl Planner for GoalSeeker {
         Some(self.dwa.goal())
     }
 
+    /// Both local planners head for the new goal, whichever drives now.
+    fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
+        self.dwa.set_goal(goal, tolerance) & self.apf.set_goal(goal, tolerance)
+    }
+
     fn write_status(&self, status: &mut PlanStatus) {
         match self.active {
             LocalPlanner::Dwa => self.dwa.write_status(status),

@@ -195,6 +195,12 @@ pub trait Planner {
     fn target(&self) -> Option<[f64; 2]> {
         None
     }
+    /// A new goal (world frame, m) from an operator (`operator/goal`), reached within
+    /// `tolerance` (m; `None` keeps the current one). Returns whether this planner seeks goals
+    /// (apf, dwa) and took it; an explorer ignores goals and returns false.
+    fn set_goal(&mut self, _goal: [f64; 2], _tolerance: Option<f64>) -> bool {
+        false
+    }
     /// Fills `planning/status` (everything but the header) after a step: `mode` is left as the
     /// caller set it ([`Limited`] writes the mode of the command it sent); by default
     /// goal = [`Planner::target`] with `STATUS_HAS_GOAL`, bounces, no frontier, no path.
@@ -230,6 +236,9 @@ impl<P: Planner + ?Sized> Planner for Box<P> {
     }
     fn target(&self) -> Option<[f64; 2]> {
         (**self).target()
+    }
+    fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
+        (**self).set_goal(goal, tolerance)
     }
     fn write_status(&self, status: &mut PlanStatus) {
         (**self).write_status(status)
@@ -314,6 +323,10 @@ impl<P: Planner> Planner for Limited<P> {
 
     fn target(&self) -> Option<[f64; 2]> {
         self.inner.target()
+    }
+
+    fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
+        self.inner.set_goal(goal, tolerance)
     }
 
     /// The wrapped planner's status with the mode of the command sent.
@@ -618,6 +631,82 @@ mod tests {
         };
         let (v, w) = l.limit(&fast, 3.0, -9.0, 0.01);
         assert_eq!((v, w), (0.5, -2.0));
+    }
+
+    /// Drives `planner` from `pose` for `steps` steps of 0.05 s on a free 6 m × 6 m grid, moving
+    /// the robot exactly as commanded (a unicycle); returns the final pose.
+    fn drive(planner: &mut dyn Planner, mut pose: Pose2, steps: u64) -> Pose2 {
+        let grid = crate::obstacles::test_support::grid_free(120, 120, 0.05);
+        let dt = 0.05;
+        let mut last_command = Command::STOP;
+        for tick in 0..steps {
+            let c = planner.step(&PlannerInput {
+                tick,
+                dt,
+                pose,
+                scan: None,
+                tactile: None,
+                grid: Some(&grid),
+                last_command,
+            });
+            pose = Pose2::new(
+                pose.x + c.v * pose.theta.cos() * dt,
+                pose.y + c.v * pose.theta.sin() * dt,
+                pose.theta + c.omega * dt,
+            );
+            last_command = c;
+        }
+        pose
+    }
+
+    /// A goal seeker (apf, dwa, and dwa re-planned by apf) handed an operator's goal behind it
+    /// turns round and closes on it, and reports it in `planning/status`; left with its old
+    /// goal it drives away from that point. The explorers take no goal.
+    #[test]
+    fn a_goal_seeker_heads_for_a_new_goal_and_an_explorer_ignores_it() {
+        let (old, new) = ((5.0, 3.0), [1.0, 3.0]);
+        let distance = |p: Pose2| (p.x - new[0]).hypot(p.y - new[1]);
+        let seekers = [
+            (PlannerKind::Apf, None),
+            (PlannerKind::Dwa, None),
+            (PlannerKind::Dwa, Some(LocalPlanner::Apf)),
+        ];
+        for (kind, replan_with) in seekers {
+            let config = PlannerConfig {
+                goal: Some(old),
+                replan_with,
+                ..PlannerConfig::new(kind)
+            };
+            let build = || build_planner(&config, limits()).unwrap_or_else(|e| panic!("{e}"));
+            let (mut redirected, mut left) = (build(), build());
+            // Under way toward the old goal, heading +x.
+            let under_way = drive(&mut redirected, Pose2::new(3.0, 3.0, 0.0), 20);
+            drive(&mut left, Pose2::new(3.0, 3.0, 0.0), 20);
+            assert!(
+                redirected.set_goal(new, Some(0.2)),
+                "{kind} {replan_with:?}"
+            );
+            let there = drive(&mut redirected, under_way, 300);
+            let away = drive(&mut left, under_way, 300);
+            let label = format!("{kind} {replan_with:?}: from {under_way:?}");
+            assert!(
+                distance(under_way) > 2.0 && distance(there) < 0.5,
+                "{label} to {there:?}"
+            );
+            assert!(
+                distance(away) > distance(under_way),
+                "{label}, left: {away:?}"
+            );
+            let mut status: Box<PlanStatus> = bytemuck::zeroed_box();
+            redirected.write_status(&mut status);
+            assert_eq!([status.goal_x, status.goal_y], new, "{label}");
+            assert_ne!(status.flags & STATUS_HAS_GOAL, 0, "{label}");
+        }
+        for kind in [PlannerKind::RandomWalk, PlannerKind::Frontier] {
+            let mut explorer = planner_by_kind(kind, limits(), 1).unwrap();
+            assert!(!explorer.set_goal(new, None), "{kind}");
+            assert_eq!(explorer.target(), None, "{kind}");
+        }
     }
 
     #[test]

@@ -18,8 +18,9 @@ use std::time::{Duration, Instant};
 /// How often a process publishes its statistics.
 const STATS_PERIOD: Duration = Duration::from_secs(1);
 
-/// The topic whose publication closes the loop's step: the command, the world's one input in the
-/// graph (`mole_types::graph`). Realtime processes beside the loop wake on it.
+/// The topic whose publication closes the loop's step: the command, the world's one input from
+/// the loop in the graph (`mole_types::graph`; the other, operator/pace, comes from outside the
+/// stack). Realtime processes beside the loop wake on it.
 const LOOP_CLOSE: Topic<mole_types::Cmd> = topics::PLANNING_CMD;
 
 /// The arguments every process takes, from its command line or the environment the launcher
@@ -639,13 +640,16 @@ impl Context {
 
 #[cfg(test)]
 mod tests {
-    /// The topic the realtime processes beside the loop wake on is the world's one input, the
-    /// command that closes the loop's step.
+    /// The topic the realtime processes beside the loop wake on is the world's one input from
+    /// the loop, the command that closes the loop's step; its other input is the operator's.
     #[test]
-    fn the_loop_closes_with_the_worlds_one_input() {
+    fn the_loop_closes_with_the_worlds_one_input_from_the_loop() {
         assert_eq!(
             mole_types::Role::World.spec().inputs,
-            &[super::LOOP_CLOSE.name]
+            &[
+                super::LOOP_CLOSE.name,
+                mole_types::topics::OPERATOR_PACE.name
+            ]
         );
     }
 }

@@ -1,11 +1,16 @@
 //! The loop of the process that keeps the stack's time (the world): it publishes step k and
-//! advances when the reply to it (the command) allows, by the clock mode's rule.
+//! advances when the reply to it (the command) allows, by the clock mode's rule. In lockstep an
+//! operator paces it (`operator/pace`): it holds before its next step, takes a number of steps
+//! and holds, or runs on.
 
 use crate::clock::ClockMode;
+use crate::context::Context;
+use crate::error::RuntimeError;
+use crate::ports::{Subscriber, Waker};
 use crate::step::{Process, Trigger};
 use crate::time::now_ns;
 use crate::waitset::Wake;
-use mole_types::Message;
+use mole_types::{Header, Message, PACE_PAUSE, PACE_RUN, PACE_STEP, Pace, topics};
 use std::time::{Duration, Instant};
 
 /// Realtime: a reply older than this no longer counts (a planner that died must not leave the
@@ -45,13 +50,21 @@ impl Process {
     /// answer to an older step never counts. A clock restarted after a crash, resumed from step
     /// k (`resume_from`), goes on with step k+1 at once and without a reply: the reply to step
     /// k went to its predecessor, and every consumer has handled step k already.
+    ///
+    /// Lockstep follows `operator/pace` before each step: a pause holds the next step, a step
+    /// order of n takes n steps (replacing one under way) and holds, run goes on. While held the
+    /// clock sleeps until a pace message or a shutdown, publishing its statistics as any waiting
+    /// process does. A step order published before this clock started was its predecessor's and
+    /// holds. Realtime ignores pace messages, warning once and counting them.
     pub fn run_clock<M: Message>(
         mut self,
         reply: Trigger<M>,
         mut on: impl FnMut(ClockEvent<M>) -> Result<Flow, BoxError>,
     ) -> Result<(), BoxError> {
         let waitset = self.ctx.waitset()?;
-        let wakers = std::mem::take(&mut self.wakers);
+        let mut operator = Operator::open(&self.ctx)?;
+        let mut wakers = std::mem::take(&mut self.wakers);
+        wakers.push(operator.waker());
         let _attached = waitset.attach_all(&wakers)?;
         self.ctx.ready();
         let mode = self.ctx.mode();
@@ -60,32 +73,51 @@ impl Process {
         let mut latency_ns = 0;
         let mut received = Instant::now();
         let mut applied: Option<u64> = None;
-        let first = match self.resume_after {
-            None => ClockEvent::Publish { tick },
-            Some(_) => {
-                (applied, tick) = (Some(tick), tick + 1);
-                self.ctx.count_step();
-                ClockEvent::Advance {
-                    tick,
-                    reply: None,
-                    latency_ns: 0,
-                }
-            }
-        };
-        if on(first)? == Flow::End {
+        // A clock resumed after a crash owes the step after its last truth: it takes it at once
+        // without a reply, unless an operator holds the run (the pace from history).
+        let mut owed = self.resume_after.is_some();
+        if owed {
+            applied = Some(tick);
+        } else if on(ClockEvent::Publish { tick })? == Flow::End {
             return Ok(());
         }
         let (mut next_step, mut last_publish) = (Instant::now() + period, Instant::now());
         loop {
+            if owed && operator.read(mode).lets_step(mode, tick) {
+                owed = false;
+                operator.took_step();
+                tick += 1;
+                self.ctx.count_step();
+                let event = ClockEvent::Advance {
+                    tick,
+                    reply: None,
+                    latency_ns: 0,
+                };
+                if on(event)? == Flow::End {
+                    return operator.finish(Ok(()));
+                }
+                (next_step, last_publish) = (Instant::now() + period, Instant::now());
+                continue;
+            }
+            // Held by the operator with this step's reply in (or owed): nothing to resend, so
+            // sleep until the operator (or a shutdown) wakes it, publishing statistics on the
+            // way like any waiting process.
+            let replied = self.subscriber_mut(reply).tick() == Some(tick);
+            let held = mode == ClockMode::Lockstep && (owed || replied);
             let deadline = match mode {
-                ClockMode::Realtime => next_step,
-                ClockMode::Lockstep => last_publish + LOCKSTEP_RESEND,
+                ClockMode::Realtime => Some(next_step),
+                ClockMode::Lockstep if held => None,
+                ClockMode::Lockstep => Some(last_publish + LOCKSTEP_RESEND),
             };
-            let wake = waitset.wait(&mut self.ctx, Some(deadline))?;
+            let wake = waitset.wait(&mut self.ctx, deadline)?;
             if wake == Wake::Shutdown {
                 on(ClockEvent::Stop { tick })?;
-                return Ok(());
+                return operator.finish(Ok(()));
             }
+            if owed {
+                continue;
+            }
+            operator.read(mode);
             // Newest by tick (Subscriber::update): a late answer to an older step never wins.
             let replies = self.subscriber_mut(reply);
             let fresh = replies.update().then(|| replies.tick()).flatten();
@@ -98,9 +130,10 @@ impl Process {
                     continue;
                 }
             }
+            // Lockstep: this step's reply is in, whether it came now or while the run was held.
             let due = match mode {
                 ClockMode::Realtime => Instant::now() >= next_step,
-                ClockMode::Lockstep => fresh == Some(tick) && applied != Some(tick),
+                ClockMode::Lockstep => replies.tick() == Some(tick) && applied != Some(tick),
             };
             if !due {
                 if mode == ClockMode::Lockstep && wake == Wake::Timeout {
@@ -113,6 +146,10 @@ impl Process {
                 }
                 continue;
             }
+            if !operator.lets_step(mode, tick) {
+                continue;
+            }
+            operator.took_step();
             let stale = mode == ClockMode::Realtime && received.elapsed() > REPLY_TIMEOUT;
             applied = Some(tick);
             tick += 1;
@@ -124,7 +161,7 @@ impl Process {
             };
             if on(event)? == Flow::End {
                 tracing::info!(tick, "run complete");
-                return Ok(());
+                return operator.finish(Ok(()));
             }
             last_publish = Instant::now();
             next_step += period;
@@ -133,5 +170,120 @@ impl Process {
                 next_step = Instant::now() + period;
             }
         }
+    }
+}
+
+/// How an operator paces a lockstep run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pacing {
+    /// Step whenever the reply is in.
+    Run,
+    /// Hold before the next step.
+    Hold,
+    /// Take this many more steps (at least one), then hold.
+    Steps(u32),
+}
+
+/// The clock's side of `operator/pace`: the pacing the newest pace message asks for.
+struct Operator {
+    pace: Subscriber<Pace>,
+    pacing: Pacing,
+    /// When this clock started (CLOCK_MONOTONIC, ns): a step order stamped before it was its
+    /// predecessor's (a clock restarted after a crash), and holds instead.
+    started_ns: u64,
+    /// Whether the hold was reported (once per hold).
+    reported_hold: bool,
+    /// Pace messages ignored in realtime.
+    ignored: u64,
+}
+
+impl Operator {
+    fn open(ctx: &Context) -> Result<Operator, RuntimeError> {
+        Ok(Operator {
+            pace: ctx.subscriber(topics::OPERATOR_PACE)?,
+            pacing: Pacing::Run,
+            started_ns: now_ns(),
+            reported_hold: false,
+            ignored: 0,
+        })
+    }
+
+    fn waker(&self) -> Waker {
+        self.pace.waker()
+    }
+
+    /// Takes every pace message that came, in order: lockstep follows the last; realtime ignores
+    /// them, warning once and counting.
+    fn read(&mut self, mode: ClockMode) -> &mut Operator {
+        let mut pacing = self.pacing;
+        let started_ns = self.started_ns;
+        let came = self.pace.drain(|pace| {
+            pacing = Self::pacing_of(pace, started_ns);
+        });
+        if came == 0 {
+            return self;
+        }
+        if mode == ClockMode::Realtime {
+            if self.ignored == 0 {
+                tracing::warn!(
+                    "{} paces lockstep runs only: ignored in realtime (counted)",
+                    topics::OPERATOR_PACE.name
+                );
+            }
+            self.ignored += came as u64;
+            return self;
+        }
+        if pacing != self.pacing {
+            tracing::info!(?pacing, "the operator paces the run");
+            self.reported_hold = false;
+        }
+        self.pacing = pacing;
+        self
+    }
+
+    /// The pacing one (valid) pace message asks for.
+    fn pacing_of(pace: &Pace, started_ns: u64) -> Pacing {
+        let Header { stamp_ns, .. } = pace.header;
+        match pace.op {
+            PACE_RUN => Pacing::Run,
+            PACE_PAUSE => Pacing::Hold,
+            PACE_STEP if stamp_ns > 0 && stamp_ns < started_ns => Pacing::Hold,
+            PACE_STEP => Pacing::Steps(pace.steps),
+            _ => unreachable!("a pace with an unknown op fails validation"),
+        }
+    }
+
+    /// Whether the clock may take the step after `tick` now; a hold is reported once.
+    fn lets_step(&mut self, mode: ClockMode, tick: u64) -> bool {
+        if mode == ClockMode::Realtime || self.pacing != Pacing::Hold {
+            return true;
+        }
+        if !self.reported_hold {
+            self.reported_hold = true;
+            tracing::info!(tick, "held by the operator after step {tick}");
+        }
+        false
+    }
+
+    /// Counts a step taken against a step order.
+    fn took_step(&mut self) {
+        if let Pacing::Steps(n) = self.pacing {
+            self.pacing = match n {
+                0 | 1 => Pacing::Hold,
+                n => Pacing::Steps(n - 1),
+            };
+        }
+    }
+
+    /// Ends the clock's loop with `result`, saying how many pace messages realtime ignored.
+    fn finish(self, result: Result<(), BoxError>) -> Result<(), BoxError> {
+        if self.ignored > 0 {
+            tracing::info!(
+                ignored = self.ignored,
+                "{} messages ignored (realtime)",
+                topics::OPERATOR_PACE.name
+            );
+        }
+        result
     }
 }

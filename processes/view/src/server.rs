@@ -1,0 +1,184 @@
+//! The page and its WebSocket: axum on a single-threaded tokio runtime in a thread of its own.
+//!
+//! Frames come from the main loop through a `watch` (the newest only: a slow page skips frames);
+//! each page's task keeps what it was sent ([`Client`]) and sends only the tiles that changed.
+//! A page's inputs go back to the main loop through a std channel; refused ones are counted
+//! and logged at debug.
+
+use axum::Router;
+use axum::extract::State;
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::get;
+use mole_view::{Access, Client, Command, Frame, MAX_INPUT_BYTES, Rejected, admit, parse_input};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc;
+use tokio::sync::watch;
+
+const INDEX_HTML: &str = include_str!("../assets/index.html");
+const VIEW_JS: &str = include_str!("../assets/view.js");
+const VIEW_CSS: &str = include_str!("../assets/view.css");
+
+/// The newest frame, none before the world's map.
+pub type Frames = watch::Sender<Option<Arc<Frame>>>;
+
+/// What every page's task shares.
+#[derive(Clone)]
+struct Shared {
+    frames: watch::Receiver<Option<Arc<Frame>>>,
+    commands: mpsc::Sender<Command>,
+    rejected: Arc<AtomicU64>,
+    access: Access,
+}
+
+impl Shared {
+    /// Takes one input: a valid command the view takes to the main loop, anything else counted.
+    fn take(&self, input: Result<Command, Rejected>) {
+        let refused = match input.and_then(|command| admit(command, self.access)) {
+            Ok(command) => {
+                // An error is the main loop gone: the view is ending.
+                let _ = self.commands.send(command);
+                return;
+            }
+            Err(why) => why,
+        };
+        self.rejected.fetch_add(1, Ordering::Relaxed);
+        tracing::debug!(%refused, "a page's input was refused");
+    }
+}
+
+/// The server's ends in the main loop.
+pub struct Served {
+    pub frames: Frames,
+    pub commands: mpsc::Receiver<Command>,
+    /// Inputs refused so far.
+    pub rejected: Arc<AtomicU64>,
+}
+
+/// Serves the page on `listener` (bound already, so a port in use is the caller's error) from
+/// a thread of its own; the pages' inputs that `access` takes go to [`Served::commands`].
+pub fn serve(listener: std::net::TcpListener, access: Access) -> std::io::Result<Served> {
+    listener.set_nonblocking(true)?;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let (frames, frames_out) = watch::channel(None);
+    let (commands_in, commands) = mpsc::channel();
+    let rejected = Arc::new(AtomicU64::new(0));
+    let shared = Shared {
+        frames: frames_out,
+        commands: commands_in,
+        rejected: rejected.clone(),
+        access,
+    };
+    let app = Router::new()
+        .route("/", get(|| async { Html(INDEX_HTML) }))
+        .route(
+            "/view.js",
+            get(|| async { asset("text/javascript", VIEW_JS) }),
+        )
+        .route("/view.css", get(|| async { asset("text/css", VIEW_CSS) }))
+        .route("/ws", get(upgrade))
+        .with_state(shared);
+    std::thread::Builder::new()
+        .name("server".into())
+        .spawn(move || {
+            runtime.block_on(async move {
+                let listener = tokio::net::TcpListener::from_std(listener)?;
+                axum::serve(listener, app).await
+            })
+        })?;
+    Ok(Served {
+        frames,
+        commands,
+        rejected,
+    })
+}
+
+fn asset(content_type: &'static str, body: &'static str) -> Response {
+    ([(header::CONTENT_TYPE, content_type)], body).into_response()
+}
+
+/// Whether a browser's WebSocket comes from the view's own page: another site open in the same
+/// browser could otherwise steer the robot through it. Clients that send no `Origin` (not a
+/// browser) are let in.
+fn same_origin(headers: &HeaderMap) -> bool {
+    let Some(origin) = headers.get(header::ORIGIN) else {
+        return true;
+    };
+    let host = headers.get(header::HOST).and_then(|h| h.to_str().ok());
+    let origin_host = origin
+        .to_str()
+        .ok()
+        .and_then(|o| o.split_once("://"))
+        .map(|(_, authority)| authority);
+    host.is_some() && origin_host == host
+}
+
+async fn upgrade(
+    State(shared): State<Shared>,
+    headers: HeaderMap,
+    ws: WebSocketUpgrade,
+) -> Response {
+    if !same_origin(&headers) {
+        tracing::warn!(origin = ?headers.get(header::ORIGIN), "a WebSocket from another site was refused");
+        return StatusCode::FORBIDDEN.into_response();
+    }
+    ws.max_message_size(MAX_INPUT_BYTES)
+        .max_frame_size(MAX_INPUT_BYTES)
+        .on_upgrade(move |socket| page(socket, shared))
+}
+
+/// Whether a receive error is the size cap (the one error a page's input can cause; the others
+/// are a connection that broke).
+fn too_long(error: &axum::Error) -> bool {
+    let mut source: Option<&dyn std::error::Error> = Some(error);
+    while let Some(e) = source {
+        let text = e.to_string();
+        if text.contains("Space limit exceeded") || text.contains("too long") {
+            return true;
+        }
+        source = e.source();
+    }
+    false
+}
+
+/// One page: every new frame out (as what changed for it), its inputs in, until it leaves or
+/// the view ends.
+async fn page(mut socket: WebSocket, shared: Shared) {
+    let mut frames = shared.frames.clone();
+    let mut client = Client::default();
+    frames.mark_changed();
+    loop {
+        tokio::select! {
+            changed = frames.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                let Some(frame) = frames.borrow_and_update().clone() else {
+                    continue;
+                };
+                let text = client.message(&frame);
+                if socket.send(Message::Text(text.into())).await.is_err() {
+                    break;
+                }
+            }
+            incoming = socket.recv() => match incoming {
+                None | Some(Ok(Message::Close(_))) => break,
+                Some(Ok(Message::Text(text))) => shared.take(parse_input(text.as_str())),
+                Some(Ok(Message::Binary(_))) => shared.take(Err(Rejected::Binary)),
+                Some(Ok(Message::Ping(_) | Message::Pong(_))) => {}
+                Some(Err(e)) => {
+                    if too_long(&e) {
+                        shared.take(Err(Rejected::Oversized));
+                    } else {
+                        tracing::debug!("a page's connection broke: {e}");
+                    }
+                    break;
+                }
+            },
+        }
+    }
+}
