@@ -278,6 +278,51 @@ fn websocket_frames_match_the_stack_and_garbage_is_counted() {
     );
 }
 
+/// A view killed beside `mole up` is started again by its policy on the port the page knows
+/// (`--view=0` included): a page that reconnects gets frames again, from a stack that never
+/// stopped.
+#[test]
+fn a_killed_view_is_started_again_on_its_port() {
+    let _serial = serial();
+    let mut stack = Stack::start("view-restart", RUN);
+    let lines = stack.stdout_lines().expect("stdout");
+    let url = view_url(&lines, Duration::from_secs(60));
+    let ws_url = format!("{}ws", url.replacen("http://", "ws://", 1));
+    let mut socket = connect(&ws_url);
+    let before = next_frame(&mut socket)["tick"].as_u64().expect("tick");
+    let world = pid_of(&stack.namespace, "mole-world");
+    let killed = pid_of(&stack.namespace, "mole-view").expect("the view runs");
+    signal(killed, nix::sys::signal::Signal::SIGKILL);
+    wait_for_new_pid(
+        &stack.namespace,
+        "mole-view",
+        Some(killed),
+        Duration::from_secs(30),
+        &stack.out,
+    );
+    // The page's way: try again until the view serves.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut socket = loop {
+        match tungstenite::connect(&ws_url) {
+            Ok(_) => break connect(&ws_url),
+            Err(e) if Instant::now() > deadline => panic!("no view at {ws_url} again: {e}"),
+            Err(_) => std::thread::sleep(Duration::from_millis(100)),
+        }
+    };
+    let after = next_frame(&mut socket);
+    assert_eq!(
+        after["full"], true,
+        "a new view starts each page whole: {after}"
+    );
+    let tick = after["tick"].as_u64().expect("tick");
+    assert!(tick > before, "frames from tick {before}, then {tick}");
+    assert_eq!(
+        pid_of(&stack.namespace, "mole-world"),
+        world,
+        "the stack went on as it was"
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // Headless Chromium
 // ---------------------------------------------------------------------------------------------

@@ -5,6 +5,7 @@
 //! its roles: a [`Sidecar`], stopped after every role (it records up to the last sample); if it
 //! dies the run goes on, unrecorded from then, with a warning.
 
+use crate::RestartPolicy;
 use crate::sidecar::{self, Attached, Sidecar};
 use crate::up::Failure;
 use clap::Args;
@@ -105,6 +106,8 @@ impl RecordPlan {
             RECORDER,
             "unrecorded from here (the file's complete chunks stay readable)",
             (self.program, self.args),
+            // A file cannot be taken up where a dead recorder left it.
+            RestartPolicy::default(),
             env,
             log_path,
             &self.file,

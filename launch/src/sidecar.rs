@@ -40,7 +40,7 @@ pub struct Sidecar {
     gone: bool,
 }
 
-/// How the sidecar ended, if it did.
+/// How the sidecar ended while it started, if it did.
 fn exit_of(supervisor: &mut Supervisor) -> Option<ExitStatus> {
     supervisor.poll().into_iter().find_map(|event| match event {
         SupervisorEvent::Exited { status, .. } => Some(status),
@@ -50,12 +50,14 @@ fn exit_of(supervisor: &mut Supervisor) -> Option<ExitStatus> {
 
 impl Sidecar {
     /// Starts `program` as `name` with the stack's environment and waits until `ready` exists
-    /// (it creates it once it listens on every topic it needs). `without` completes the
-    /// sentence "the run goes on …" of the warning should it die.
+    /// (it creates it once it listens on every topic it needs); should it die later, `restart`
+    /// says whether it is started again. `without` completes the sentence "the run goes on …"
+    /// of the warning once it stays down.
     pub fn start(
         name: &'static str,
         without: &'static str,
         spec: (PathBuf, Vec<String>),
+        restart: RestartPolicy,
         env: &[(String, String)],
         log_path: PathBuf,
         ready: &Path,
@@ -67,7 +69,7 @@ impl Sidecar {
             program,
             args,
             env: env.to_vec(),
-            restart: RestartPolicy::default(),
+            restart,
             log_path: log_path.clone(),
             cwd: None,
         };
@@ -103,22 +105,35 @@ impl Sidecar {
         })
     }
 
-    /// Warns, once, when the sidecar died, and releases what its node held: the run goes on
-    /// without it.
+    /// Releases what a dead sidecar's node held, says so, and, once its policy gives up (or at
+    /// once under `never`), warns that the run goes on without it; a restart is the
+    /// supervisor's, by the policy.
     pub fn check(&mut self) {
         if self.gone {
             return;
         }
-        if let Some(status) = exit_of(&mut self.supervisor) {
+        let (name, log) = (self.name, self.log_path.display());
+        for event in self.supervisor.poll() {
+            match event {
+                SupervisorEvent::Exited { status, .. } => {
+                    // Release its queues: a lockstep publisher would wait for them to be read.
+                    cleanup_dead_nodes();
+                    tracing::warn!("the {name} exited ({status}) (see {log})");
+                }
+                SupervisorEvent::Restarted { attempt, .. } => {
+                    tracing::info!(attempt, "the {name} was started again");
+                }
+                SupervisorEvent::RestartFailed { message, .. } => {
+                    tracing::warn!("the {name} could not be started again: {message}");
+                }
+                SupervisorEvent::GaveUp { .. } => self.gone = true,
+            }
+        }
+        if !self.supervisor.is_running(name) && !self.supervisor.restart_pending(name) {
             self.gone = true;
-            // Release its queues: a lockstep publisher would wait for them to be read.
-            cleanup_dead_nodes();
-            tracing::warn!(
-                "the {} exited ({status}); the run goes on {} (see {})",
-                self.name,
-                self.without,
-                self.log_path.display()
-            );
+        }
+        if self.gone {
+            tracing::warn!("the run goes on {}", self.without);
         }
     }
 

@@ -9,6 +9,7 @@
 
 use crate::sidecar::{self, Attached, Sidecar};
 use crate::up::Failure;
+use crate::{RestartPolicy, RestartWhen};
 use clap::Args;
 use mole_types::env;
 use mole_view::{DEFAULT_PORT, VIEW_PROGRAM};
@@ -21,6 +22,15 @@ use std::time::Duration;
 
 /// The view's name in its log file and its supervisor.
 const VIEW: &str = "view";
+/// Beside `mole up` a view that died is started again (the page reconnects by itself), on the
+/// same port; after five restarts the run goes on without it.
+const RESTART: RestartPolicy = RestartPolicy {
+    policy: RestartWhen::OnFailure,
+    backoff_ms: 200,
+    max_backoff_ms: 5000,
+    max: 5,
+    stable_after_ms: 10_000,
+};
 
 /// Where and how the view serves (`mole view`'s flags; `mole up --view[=PORT]`).
 #[derive(Debug, Clone, Args)]
@@ -141,29 +151,39 @@ impl ViewPlan {
     }
 
     /// Starts the view with the stack's environment, waits until it serves and prints its URL.
-    pub fn start(self, env: &[(String, String)], log_path: PathBuf) -> Result<View, Failure> {
+    /// Port 0 is made a free port here, so that a restarted view serves where the page looks.
+    pub fn start(mut self, env: &[(String, String)], log_path: PathBuf) -> Result<View, Failure> {
+        if self.serve.port == 0 {
+            self.serve.port = std::net::TcpListener::bind((self.serve.bind, 0))
+                .and_then(|l| l.local_addr())
+                .map_err(|e| Failure::run(format!("no free port for the view: {e}")))?
+                .port();
+        }
         let ready = ready_file();
         let args = self.serve.view_args(&ready);
         let sidecar = Sidecar::start(
             VIEW,
             "without the view",
             (self.program, args),
+            RESTART,
             env,
             log_path,
             &ready,
         )?;
         announce(&ready);
-        Ok(View { sidecar })
+        Ok(View { sidecar, ready })
     }
 }
 
 /// The view beside a stack that `mole up` runs.
 pub struct View {
     sidecar: Sidecar,
+    /// Where it writes its URL once it serves (again after a restart).
+    ready: PathBuf,
 }
 
 impl View {
-    /// Warns, once, when the view died: the run goes on without it.
+    /// Restarts a view that died, by [`RESTART`]; warns when the run goes on without it.
     pub fn check(&mut self) {
         self.sidecar.check();
     }
@@ -173,6 +193,7 @@ impl View {
         if self.sidecar.stop(timeout) {
             tracing::warn!("the view needed SIGKILL");
         }
+        let _ = std::fs::remove_file(&self.ready);
     }
 }
 
