@@ -76,7 +76,11 @@ fn run_stack(up_args: &UpArgs) -> Result<StackReport, Failure> {
     let mut up_args = up_args.clone();
     up_args.quiet = true;
     let outcome = up(&up_args)?;
-    let summary = &outcome.summary;
+    let summary = outcome.summary.as_ref().ok_or_else(|| {
+        Failure::input(
+            "this stack has no monitor, so it reports no loop latency; bench the half that has it",
+        )
+    })?;
     let (ticks, wall_time_s) = (summary.ticks, summary.wall_time_s);
     let report = StackReport {
         mode: summary.mode.clone(),

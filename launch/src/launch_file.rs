@@ -14,6 +14,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use mole_types::link::{self, BRIDGE_ROLE, LinkError};
 use mole_types::{ClockMode, EstimatorKind, PlannerKind, Role, UnknownChoice};
 use serde::Deserialize;
 use toml::Spanned;
@@ -134,6 +135,64 @@ pub struct ProcessSpec {
     pub restart: RestartPolicy,
 }
 
+/// The `[bridge]` table of one half of a stack split across machines: what the `bridge`
+/// process (`mole-bridge`) carries and where it connects.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BridgeTable {
+    /// The namespace of the stack on the other side.
+    pub peer_namespace: String,
+    /// Topics published here and sent to the peer.
+    pub out: Vec<String>,
+    /// Topics the peer publishes, published here.
+    pub inbound: Vec<String>,
+    /// zenoh endpoints to listen on (`tcp/HOST:PORT`, `tls/HOST:PORT`).
+    pub listen: Vec<String>,
+    /// zenoh endpoints to connect to.
+    pub connect: Vec<String>,
+    /// TLS files as written; resolve them with [`LaunchFile::resolve_path`].
+    pub tls: Option<TlsFiles>,
+}
+
+/// `tls = { root_ca = "...", cert = "...", key = "..." }`: PEM files.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TlsFiles {
+    /// The certificate authority both sides trust.
+    pub root_ca: PathBuf,
+    /// This side's certificate.
+    pub cert: PathBuf,
+    /// This side's private key.
+    pub key: PathBuf,
+}
+
+impl BridgeTable {
+    /// The bridge's command-line arguments for these settings, with the TLS files resolved.
+    #[must_use]
+    pub fn args(&self, tls: Option<&TlsFiles>) -> Vec<String> {
+        let mut args = vec!["--peer-namespace".to_owned(), self.peer_namespace.clone()];
+        for (flag, values) in [
+            ("--out", &self.out),
+            ("--in", &self.inbound),
+            ("--listen", &self.listen),
+            ("--connect", &self.connect),
+        ] {
+            for value in values {
+                args.extend([flag.to_owned(), value.clone()]);
+            }
+        }
+        if let Some(tls) = tls {
+            for (flag, path) in [
+                ("--tls-root-ca", &tls.root_ca),
+                ("--tls-cert", &tls.cert),
+                ("--tls-key", &tls.key),
+            ] {
+                args.extend([flag.to_owned(), path.display().to_string()]);
+            }
+        }
+        args
+    }
+}
+
 /// A parsed and validated launch file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LaunchFile {
@@ -143,6 +202,8 @@ pub struct LaunchFile {
     pub stack: StackSpec,
     /// The `[[process]]` tables in file order.
     pub processes: Vec<ProcessSpec>,
+    /// The `[bridge]` table of a half of a split stack.
+    pub bridge: Option<BridgeTable>,
 }
 
 impl LaunchFile {
@@ -223,6 +284,24 @@ struct RawLaunchFile {
     stack: Option<RawStack>,
     #[serde(default)]
     process: Vec<RawProcess>,
+    #[serde(default)]
+    bridge: Option<Spanned<RawBridge>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBridge {
+    peer_namespace: Spanned<String>,
+    #[serde(default)]
+    out: Vec<Spanned<String>>,
+    #[serde(default, rename = "in")]
+    inbound: Vec<Spanned<String>>,
+    #[serde(default)]
+    listen: Vec<Spanned<String>>,
+    #[serde(default)]
+    connect: Vec<Spanned<String>>,
+    #[serde(default)]
+    tls: Option<TlsFiles>,
 }
 
 #[derive(Deserialize)]
@@ -296,11 +375,14 @@ pub fn parse_launch_file(text: &str, path: &Path) -> Result<LaunchFile, LaunchEr
         let role = p.role.get_ref();
         if let Err(e) = role.parse::<Role>()
             && !is_extra_observer(role)
+            && role != BRIDGE_ROLE
         {
             return Err(invalid(
                 Some(p.role.span()),
                 format!("process[{i}].role"),
-                format!("{e}, or observer-<name> (an extra observer)"),
+                format!(
+                    "{e}, or observer-<name> (an extra observer), or {BRIDGE_ROLE} (a split stack's link)"
+                ),
             ));
         }
         if let Some(first) = raw.process[..i].iter().find(|q| q.role.get_ref() == role) {
@@ -393,11 +475,108 @@ pub fn parse_launch_file(text: &str, path: &Path) -> Result<LaunchFile, LaunchEr
         ));
     }
 
+    let bridge = validate_bridge(raw.bridge, &processes, &invalid)?;
     Ok(LaunchFile {
         path: path.to_path_buf(),
         stack,
         processes,
+        bridge,
     })
+}
+
+/// Checks the `[bridge]` table: there exactly when a `bridge` process is, every topic one a
+/// bridge may carry, each in one direction, every endpoint well formed, TLS where `tls/` is.
+fn validate_bridge(
+    raw: Option<Spanned<RawBridge>>,
+    processes: &[ProcessSpec],
+    invalid: &impl Fn(Option<std::ops::Range<usize>>, String, String) -> LaunchError,
+) -> Result<Option<BridgeTable>, LaunchError> {
+    let has_process = processes.iter().any(|p| p.role == BRIDGE_ROLE);
+    let raw = match (raw, has_process) {
+        (None, false) => return Ok(None),
+        (None, true) => {
+            return Err(invalid(
+                None,
+                "bridge".to_owned(),
+                format!(
+                    "a `{BRIDGE_ROLE}` process but no [bridge] table, expected [bridge] with peer_namespace, out, in, listen or connect"
+                ),
+            ));
+        }
+        (Some(raw), false) => {
+            return Err(invalid(
+                Some(raw.span()),
+                "bridge".to_owned(),
+                format!(
+                    "a [bridge] table but no process with role = \"{BRIDGE_ROLE}\", expected one (command = \"mole-bridge\")"
+                ),
+            ));
+        }
+        (Some(raw), true) => raw,
+    };
+    let span = raw.span();
+    let raw = raw.into_inner();
+    let located = |field: &str, e: LinkError| {
+        invalid(Some(span.clone()), format!("bridge.{field}"), e.to_string())
+    };
+    if raw.peer_namespace.get_ref().trim().is_empty() {
+        return Err(invalid(
+            Some(raw.peer_namespace.span()),
+            "bridge.peer_namespace".to_owned(),
+            LinkError::NoPeer.to_string(),
+        ));
+    }
+    let mut seen_out = Vec::new();
+    for (field, list) in [("out", &raw.out), ("in", &raw.inbound)] {
+        for (i, topic) in list.iter().enumerate() {
+            let name = link::carried_topic(topic.get_ref()).map_err(|e| {
+                invalid(
+                    Some(topic.span()),
+                    format!("bridge.{field}[{i}]"),
+                    e.to_string(),
+                )
+            })?;
+            if field == "out" {
+                seen_out.push(name);
+            } else if seen_out.contains(&name) {
+                return Err(invalid(
+                    Some(topic.span()),
+                    format!("bridge.in[{i}]"),
+                    LinkError::BothWays(name.to_owned()).to_string(),
+                ));
+            }
+        }
+    }
+    for (field, list) in [("listen", &raw.listen), ("connect", &raw.connect)] {
+        for (i, endpoint) in list.iter().enumerate() {
+            endpoint.get_ref().parse::<link::Endpoint>().map_err(|e| {
+                invalid(
+                    Some(endpoint.span()),
+                    format!("bridge.{field}[{i}]"),
+                    e.to_string(),
+                )
+            })?;
+        }
+    }
+    let texts =
+        |list: &[Spanned<String>]| list.iter().map(|s| s.get_ref().clone()).collect::<Vec<_>>();
+    let (listen, connect) = (texts(&raw.listen), texts(&raw.connect));
+    if let Err(e) = link::endpoints(&listen, &connect, raw.tls.is_some()) {
+        let field = if matches!(e, LinkError::NoEndpoint) {
+            "listen"
+        } else {
+            "tls"
+        };
+        return Err(located(field, e));
+    }
+    Ok(Some(BridgeTable {
+        peer_namespace: raw.peer_namespace.into_inner(),
+        out: texts(&raw.out),
+        inbound: texts(&raw.inbound),
+        listen,
+        connect,
+        tls: raw.tls,
+    }))
 }
 
 /// Checks the `[stack]` numbers and fills defaults.

@@ -177,7 +177,7 @@ impl RunEnd {
 
 /// When started through `cargo run`, builds every process binary too (cargo builds only the
 /// package it runs), so `mole` never starts a stale or missing process.
-fn build_process_binaries() -> Result<(), Failure> {
+fn build_process_binaries(with_bridge: bool) -> Result<(), Failure> {
     let (Some(cargo), Ok(exe)) = (std::env::var_os("CARGO"), std::env::current_exe()) else {
         return Ok(());
     };
@@ -193,6 +193,10 @@ fn build_process_binaries() -> Result<(), Failure> {
     command
         .current_dir(manifest_dir)
         .args(["build", "--workspace", "--bins", "--quiet"]);
+    // The bridge brings zenoh: built only for a stack split across machines.
+    if !with_bridge {
+        command.args(["--exclude", "mole-bridge"]);
+    }
     if profile != "debug" {
         command.args([
             "--profile",
@@ -220,8 +224,9 @@ fn build_process_binaries() -> Result<(), Failure> {
 pub struct RunOutcome {
     /// summary.json of the run.
     pub summary_path: PathBuf,
-    /// The summary as the launcher completed it.
-    pub summary: Summary,
+    /// The summary as the launcher completed it; `None` for a half of a split stack without the
+    /// monitor (the other half writes it).
+    pub summary: Option<Summary>,
     /// What the processes reported on stack/stats.
     pub stats: StatsCollector,
 }
@@ -750,6 +755,24 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
     let summary_path = args.out.join("summary.json");
     let exit_reason = end.exit_reason();
     let failure = end.into_failure();
+    if plan.launch.process(Role::Monitor.name()).is_none() {
+        // A half of a split stack without the monitor: the summary is written on the other side.
+        if let Some(failure) = failure {
+            return Err(failure);
+        }
+        println!(
+            "{} ({}): this half has no monitor; the run's summary is written where the monitor runs \
+             (logs: {})",
+            exit_reason.unwrap_or("finished"),
+            plan.mode,
+            args.out.join("logs").display()
+        );
+        return Ok(RunOutcome {
+            summary_path,
+            summary: None,
+            stats: watch.collector,
+        });
+    }
     if !summary_path.exists()
         && let Some(failure) = failure
     {
@@ -776,7 +799,7 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         Some(failure) => Err(failure),
         None => Ok(RunOutcome {
             summary_path,
-            summary,
+            summary: Some(summary),
             stats: watch.collector,
         }),
     }

@@ -13,6 +13,7 @@ pub mod geometry;
 pub mod kinds;
 pub mod graph;
 pub mod layout;
+pub mod link;
 pub mod messages;
 pub mod topics;
 

@@ -31,7 +31,13 @@ pub fn bin_dir() -> PathBuf {
         .expect("target/<profile>")
         .to_path_buf();
     let programs = mole_types::GRAPH.iter().map(|r| r.program);
-    let beside = ["mole", "mole-recorder", "mole-player", "mole-view"];
+    let beside = [
+        "mole",
+        "mole-recorder",
+        "mole-player",
+        "mole-view",
+        "mole-bridge",
+    ];
     for name in beside.into_iter().chain(programs) {
         assert!(
             dir.join(name).exists(),

@@ -207,7 +207,7 @@ fn empty_command_and_bad_role() {
         msg,
         "launch/stacks/x.toml:16:8: field `process[1].role`: unknown role `plan ning`, expected \
          one of: world, sensing, localization, mapping, planning, monitor, or observer-<name> \
-         (an extra observer)"
+         (an extra observer), or bridge (a split stack's link)"
     );
     for bad in [
         "../x",
@@ -460,4 +460,115 @@ proptest! {
             prop_assert_eq!(e.exit_code(), 2);
         }
     }
+}
+
+/// The two halves of launch/stacks/split are one stack: every role of the graph on exactly one
+/// side, the same [stack] table, each side's bridge carrying in what the other carries out, and
+/// every input a role reads from the other side's roles carried to it (derived from the graph).
+#[test]
+fn split_stacks_are_the_graph_carried_by_their_bridges() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("stacks/split");
+    let on = load_launch_file(&dir.join("onboard.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let off = load_launch_file(&dir.join("offboard.toml")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(on.stack, off.stack, "the halves run the same steps");
+    let (on_bridge, off_bridge) = (on.bridge.clone().unwrap(), off.bridge.clone().unwrap());
+    assert_eq!(on_bridge.out, off_bridge.inbound);
+    assert_eq!(on_bridge.inbound, off_bridge.out);
+    let graph_roles = |lf: &LaunchFile| -> Vec<Role> {
+        lf.processes
+            .iter()
+            .filter_map(|p| p.role.parse::<Role>().ok())
+            .collect()
+    };
+    let (on_roles, off_roles) = (graph_roles(&on), graph_roles(&off));
+    for spec in GRAPH {
+        assert!(
+            on_roles.contains(&spec.role) != off_roles.contains(&spec.role),
+            "{} runs on exactly one side",
+            spec.role
+        );
+    }
+    for (here, there, carried_in) in [
+        (&on_roles, &off_roles, &on_bridge.inbound),
+        (&off_roles, &on_roles, &off_bridge.inbound),
+    ] {
+        for role in here {
+            for input in role.spec().inputs {
+                let from_there = there.iter().any(|r| r.spec().outputs.contains(input));
+                assert!(
+                    !from_there || carried_in.iter().any(|t| t == input),
+                    "{role} reads {input} from the other side: the bridge must carry it in"
+                );
+            }
+        }
+    }
+}
+
+/// A bad [bridge] table is refused naming the field and what was expected.
+#[test]
+fn bad_bridge_tables_name_the_field() {
+    let bridge_process = "\n[[process]]\nrole = \"bridge\"\ncommand = \"mole-bridge\"\n";
+    let with = |table: &str| format!("{VALID}{bridge_process}\n[bridge]\n{table}");
+    let ok = parse(&with(
+        "peer_namespace = \"b\"\nlisten = [\"tcp/127.0.0.1:7447\"]\nout = [\"world/truth\"]\nin = [\"planning/cmd\"]",
+    ))
+    .unwrap();
+    assert_eq!(
+        ok.bridge.unwrap().args(None),
+        [
+            "--peer-namespace",
+            "b",
+            "--out",
+            "world/truth",
+            "--in",
+            "planning/cmd",
+            "--listen",
+            "tcp/127.0.0.1:7447"
+        ]
+    );
+    for (table, field, expected) in [
+        (
+            "peer_namespace = \"b\"\nlisten = [\"tcp/127.0.0.1:7447\"]\nout = [\"world/truht\"]",
+            "bridge.out[0]",
+            "unknown topic `world/truht`",
+        ),
+        (
+            "peer_namespace = \"b\"\nlisten = [\"tcp/127.0.0.1:7447\"]\nin = [\"stack/stats\"]",
+            "bridge.in[0]",
+            "per host",
+        ),
+        (
+            "peer_namespace = \"b\"\nlisten = [\"udp/127.0.0.1:7447\"]",
+            "bridge.listen[0]",
+            "expected tcp/HOST:PORT or tls/HOST:PORT",
+        ),
+        (
+            "peer_namespace = \"b\"",
+            "bridge.listen",
+            "expected at least one",
+        ),
+        (
+            "peer_namespace = \"b\"\nlisten = [\"tls/127.0.0.1:7447\"]",
+            "bridge.tls",
+            "no TLS certificate",
+        ),
+        (
+            "peer_namespace = \"\"\nlisten = [\"tcp/127.0.0.1:7447\"]",
+            "bridge.peer_namespace",
+            "expected the namespace",
+        ),
+    ] {
+        let msg = err(&with(table));
+        assert!(
+            msg.contains(field) && msg.contains(expected),
+            "{table}: {msg}"
+        );
+    }
+    assert!(err(&format!("{VALID}{bridge_process}")).contains("no [bridge] table"));
+    assert!(
+        err(&format!(
+            "{VALID}\n[bridge]\npeer_namespace = \"b\"\nlisten = [\"tcp/127.0.0.1:7447\"]"
+        ))
+        .contains("no process with role = \"bridge\"")
+    );
 }

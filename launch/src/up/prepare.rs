@@ -3,11 +3,13 @@
 //! namespace, the programs and the output directory.
 
 use super::{Failure, UpArgs};
+use crate::launch_file::TlsFiles;
 use crate::{
     DEFAULT_LAUNCH_FILE, LaunchFile, StackOverrides, StackSpec, apply_swaps, load_launch_file,
     parse_swap, resolve_program,
 };
 use mole_runtime::live_nodes_in_namespace;
+use mole_types::link::BRIDGE_ROLE;
 use mole_types::{ClockMode, PlannerKind, env};
 use mole_world::Scenario;
 use std::collections::BTreeMap;
@@ -30,7 +32,8 @@ pub(super) struct Plan {
 
 /// Reads, overrides and checks everything; nothing has started when this fails.
 pub(super) fn prepare(args: &UpArgs) -> Result<Plan, Failure> {
-    let (launch, scenario_path, scenario) = load_stack(args)?;
+    let (mut launch, scenario_path, scenario) = load_stack(args)?;
+    give_the_bridge_its_settings(&mut launch)?;
     check_goal(launch.stack.planner, args.goal, &scenario)?;
     // No length at all: run until Ctrl-C.
     let ticks = match (launch.stack.ticks, launch.stack.duration_s) {
@@ -40,7 +43,7 @@ pub(super) fn prepare(args: &UpArgs) -> Result<Plan, Failure> {
     };
     let seed = args.seed.unwrap_or(launch.stack.seed);
     refuse_namespace_in_use(&args.namespace)?;
-    super::build_process_binaries()?;
+    super::build_process_binaries(launch.bridge.is_some())?;
     let beside = std::env::current_exe()
         .ok()
         .and_then(|p| p.parent().map(Path::to_path_buf))
@@ -62,6 +65,34 @@ pub(super) fn prepare(args: &UpArgs) -> Result<Plan, Failure> {
         programs,
         beside,
     })
+}
+
+/// A split stack's bridge gets its `[bridge]` table as arguments, the TLS files resolved like
+/// any data path of the launch file.
+fn give_the_bridge_its_settings(launch: &mut LaunchFile) -> Result<(), Failure> {
+    let Some(bridge) = &launch.bridge else {
+        return Ok(());
+    };
+    let tls = match &bridge.tls {
+        Some(tls) => {
+            let resolve = |what: &str, path: &Path| {
+                launch
+                    .resolve_path(what, path)
+                    .map_err(|e| Failure::input(e.to_string()))
+            };
+            Some(TlsFiles {
+                root_ca: resolve("bridge.tls.root_ca", &tls.root_ca)?,
+                cert: resolve("bridge.tls.cert", &tls.cert)?,
+                key: resolve("bridge.tls.key", &tls.key)?,
+            })
+        }
+        None => None,
+    };
+    let args = bridge.args(tls.as_ref());
+    if let Some(process) = launch.processes.iter_mut().find(|p| p.role == BRIDGE_ROLE) {
+        process.args.extend(args);
+    }
+    Ok(())
 }
 
 /// The launch file with the command line's overrides and swaps, and its scenario.

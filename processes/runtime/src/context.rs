@@ -452,6 +452,11 @@ impl Context {
         Ok(WaitSet::new(self.doorbell.clone()))
     }
 
+    /// A handle that wakes this node's WaitSet from another thread.
+    pub fn ringer(&self) -> Result<crate::doorbell::Ringer, RuntimeError> {
+        self.doorbell.ringer()
+    }
+
     /// The read end of this node's doorbell, for tests that take a ring behind the WaitSet's
     /// back.
     #[doc(hidden)]
@@ -521,15 +526,15 @@ fn resource_usage() -> (u64, u64) {
 }
 
 /// A payload's layout as iceoryx2 records it for a service: type name, size, alignment.
-struct PayloadLayout {
-    type_name: String,
-    size: usize,
-    alignment: usize,
+pub struct PayloadLayout {
+    pub type_name: String,
+    pub size: usize,
+    pub alignment: usize,
 }
 
 impl PayloadLayout {
     /// The layout of this process's message type.
-    fn of<M: Message>() -> PayloadLayout {
+    pub fn of<M: Message>() -> PayloadLayout {
         PayloadLayout {
             type_name: M::wire_type_name().to_string(),
             size: core::mem::size_of::<M>(),
@@ -576,8 +581,9 @@ fn recorded_payload(name: &ServiceName) -> Option<PayloadLayout> {
     }
 }
 
-/// The sentence for a topic whose service carries another layout than this process's.
-fn layout_mismatch(ours: &PayloadLayout, found: &PayloadLayout) -> String {
+/// The sentence for a topic whose service (or a bridge's peer) carries another layout than this
+/// process's.
+pub fn layout_mismatch(ours: &PayloadLayout, found: &dyn std::fmt::Display) -> String {
     format!(
         "expected {ours}, found {found}: this process and the topic disagree on the message \
          layout; build both sides from the same shared-types"
@@ -588,7 +594,7 @@ fn layout_mismatch(ours: &PayloadLayout, found: &PayloadLayout) -> String {
 fn describe_open_error(debug: &str, ours: &PayloadLayout, found: Option<&PayloadLayout>) -> String {
     if debug.contains("IncompatibleTypes") {
         match found {
-            Some(found) => layout_mismatch(ours, found),
+            Some(found) => layout_mismatch(ours, &found),
             None => format!(
                 "another process uses a different message type on this topic (this process \
                  speaks {ours})"

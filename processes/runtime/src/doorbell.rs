@@ -72,6 +72,15 @@ impl Doorbell {
         self.pipe.as_fd()
     }
 
+    /// A handle that rings this doorbell from another thread (see [`Ringer`]).
+    pub(crate) fn ringer(&self) -> Result<Ringer, RuntimeError> {
+        let pipe = self
+            .pipe
+            .try_clone()
+            .map_err(|e| RuntimeError::Wait(format!("doorbell: cannot share its pipe: {e}")))?;
+        Ok(Ringer(std::sync::Arc::new(pipe)))
+    }
+
     /// Takes every ring waiting in the pipe (usually one read).
     pub(crate) fn empty(&self) {
         let mut rings = [0u8; 64];
@@ -86,6 +95,19 @@ impl Doorbell {
 impl Drop for Doorbell {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Rings a node's doorbell from any thread: how a thread that is not the node's (a network
+/// callback in the bridge) wakes the node's [`crate::WaitSet`], which then returns
+/// [`crate::Wake::Data`].
+#[derive(Clone)]
+pub struct Ringer(std::sync::Arc<OwnedFd>);
+
+impl Ringer {
+    /// Writes one byte; a full pipe already holds a ring, so a failed write loses nothing.
+    pub fn ring(&self) {
+        let _ = nix::unistd::write(&*self.0, &[1u8]);
     }
 }
 

@@ -137,6 +137,18 @@ impl<M: Message> Publisher<M> {
     pub fn topic(&self) -> &'static str {
         self.topic
     }
+
+    /// Counts `n` samples lost before this publisher could send them (a bridge: samples its
+    /// peer sent that never crossed the link), in this port's `dropped` statistics.
+    pub fn count_lost(&self, n: u64) {
+        self.stats.dropped(n);
+    }
+
+    /// Counts one sample refused before it was sent (a bridge: a malformed one from its peer),
+    /// in this port's `invalid` statistics.
+    pub fn count_invalid(&self) {
+        self.stats.invalid();
+    }
 }
 
 /// A typed subscriber bound to one topic.

@@ -1,0 +1,320 @@
+//! One stack on two "machines": the two halves of launch/stacks/split, each started by its own
+//! `mole up` in its own namespace, joined by their bridges over zenoh on loopback TCP.
+
+use mole_integration_tests::*;
+use mole_monitor::Summary;
+use mole_runtime::{ClockMode, Subscriber};
+use mole_types::{Truth, topics};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// The two halves' launch files for namespaces `onboard` and `offboard`, the on-board bridge
+/// listening on `port`; `bridge_backoff_ms`: how long a killed bridge stays down.
+fn split_files(
+    dir: &Path,
+    onboard: &str,
+    offboard: &str,
+    port: u16,
+    bridge_backoff_ms: u64,
+) -> (PathBuf, PathBuf) {
+    let split = workspace().join("launch/stacks/split");
+    let mut files = Vec::new();
+    for (name, peer_was, peer) in [
+        ("onboard", "offboard", offboard),
+        ("offboard", "onboard", onboard),
+    ] {
+        let text =
+            std::fs::read_to_string(split.join(format!("{name}.toml"))).expect("split launch file");
+        let text = text
+            .replace(
+                &format!("peer_namespace = \"{peer_was}\""),
+                &format!("peer_namespace = \"{peer}\""),
+            )
+            .replace("127.0.0.1:7447", &format!("127.0.0.1:{port}"))
+            // The bridge is the first process of both files.
+            .replacen(
+                "backoff_ms = 200,",
+                &format!("backoff_ms = {bridge_backoff_ms},"),
+                1,
+            );
+        let path = dir.join(format!("{name}.toml"));
+        std::fs::write(&path, text).expect("write launch file");
+        files.push(path);
+    }
+    (files.remove(0), files.remove(0))
+}
+
+/// A TCP port nobody listens on now.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+/// Both halves, started the off-board one first (either order works: each bridge waits for
+/// the other).
+struct Split {
+    onboard: Stack,
+    offboard: Stack,
+    _dir: TempDir,
+}
+
+impl Split {
+    fn start(test: &str, args: &[&str], bridge_backoff_ms: u64) -> Split {
+        let dir = TempDir::new(test);
+        let (on_ns, off_ns) = (
+            unique_namespace(&format!("{test}-on")),
+            unique_namespace(&format!("{test}-off")),
+        );
+        let (on_file, off_file) =
+            split_files(&dir.0, &on_ns, &off_ns, free_port(), bridge_backoff_ms);
+        let with = |file: &Path| {
+            let mut all = vec![file.to_str().expect("utf-8 path").to_owned()];
+            all.extend(args.iter().map(|a| (*a).to_owned()));
+            all
+        };
+        let off_args = with(&off_file);
+        let offboard = Stack::start_in(
+            &off_ns,
+            &off_args.iter().map(String::as_str).collect::<Vec<_>>(),
+        );
+        let on_args = with(&on_file);
+        let onboard = Stack::start_in(
+            &on_ns,
+            &on_args.iter().map(String::as_str).collect::<Vec<_>>(),
+        );
+        Split {
+            onboard,
+            offboard,
+            _dir: dir,
+        }
+    }
+}
+
+/// A lockstep summary without what differs from run to run or from one host to two (wall
+/// time, latencies, rates, the roles that ran here): what the scenario and seed alone decide.
+fn deterministic(summary: &Summary) -> Summary {
+    Summary {
+        wall_time_s: 0.0,
+        launcher_wall_time_s: None,
+        loop_latency_us: Default::default(),
+        estimator_update_us: Default::default(),
+        topics: Default::default(),
+        restarts: Default::default(),
+        ..summary.clone()
+    }
+}
+
+#[test]
+fn a_split_lockstep_run_matches_the_single_host_run() {
+    let _serial = serial();
+    let before = shm_files();
+    let args = ["--mode", "lockstep", "--ticks", "1500", "--seed", "7"];
+
+    let single = Stack::start("split-single", &args);
+    let single_out = single.out.clone();
+    let keep = TempDir::new("split-single-keep");
+    let output = single.wait_and_copy(&keep.0, Duration::from_secs(300));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let single = summary(&keep.0);
+    drop(single_out);
+
+    let split = Split::start("split-lockstep", &args, 200);
+    let Split {
+        onboard,
+        offboard,
+        _dir,
+    } = split;
+    let on_keep = TempDir::new("split-on-keep");
+    let off_keep = TempDir::new("split-off-keep");
+    let on_output = onboard.wait_and_copy(&on_keep.0, Duration::from_secs(300));
+    let off_output = offboard.wait_and_copy(&off_keep.0, Duration::from_secs(300));
+    assert!(
+        off_output.status.success() && on_output.status.success(),
+        "off board: {}\non board: {}\n{}\n{}",
+        String::from_utf8_lossy(&off_output.stderr),
+        String::from_utf8_lossy(&on_output.stderr),
+        logs(&off_keep.0),
+        logs(&on_keep.0)
+    );
+    assert!(
+        String::from_utf8_lossy(&on_output.stdout).contains("this half has no monitor"),
+        "{}",
+        String::from_utf8_lossy(&on_output.stdout)
+    );
+    let split = summary(&off_keep.0);
+    assert_eq!(split.ticks, 1500, "{split:#?}");
+    assert_eq!(split.grid_hash, single.grid_hash, "frontier grids differ");
+    assert_eq!(
+        split.contact_hash, single.contact_hash,
+        "contact grids differ"
+    );
+    assert_eq!(deterministic(&split), deterministic(&single));
+    assert_eq!(split.restarts.get("bridge"), Some(&0), "{split:#?}");
+    assert_eq!(
+        left_behind(&before),
+        Vec::<String>::new(),
+        "shared memory left behind"
+    );
+}
+
+/// Truths read from a running stack, kept in order.
+struct TruthTap {
+    subscriber: Subscriber<Truth>,
+    _ctx: mole_runtime::Context,
+}
+
+impl TruthTap {
+    fn open(namespace: &str) -> TruthTap {
+        let ctx = join_stack(namespace, "test-truth", ClockMode::Realtime);
+        let subscriber = ctx
+            .passive_subscriber(topics::WORLD_TRUTH)
+            .expect("subscribe to world/truth");
+        TruthTap {
+            subscriber,
+            _ctx: ctx,
+        }
+    }
+
+    /// Reads truths until `done` says so over the truths read in this call (`None`: not yet),
+    /// or fails after `timeout` naming `what`.
+    fn until<T>(
+        &mut self,
+        what: &str,
+        timeout: Duration,
+        logs_of: &[&Path],
+        mut done: impl FnMut(&[Truth]) -> Option<T>,
+    ) -> T {
+        let deadline = Instant::now() + timeout;
+        let mut seen: Vec<Truth> = Vec::new();
+        loop {
+            self.subscriber.drain(|t| seen.push(*t));
+            if let Some(found) = done(&seen) {
+                return found;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{what}: not within {timeout:?} ({} truths read)\n{}",
+                seen.len(),
+                logs_of.iter().map(|p| logs(p)).collect::<String>()
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+/// `n` truths in a row that applied no command (none came: the link is down) and left the robot
+/// standing.
+fn stopped_for(truths: &[Truth], n: usize) -> Option<()> {
+    let standing = |t: &Truth| t.cmd_latency_ns == 0 && t.v == 0.0 && t.omega == 0.0;
+    truths
+        .windows(n)
+        .any(|w| w.iter().all(standing))
+        .then_some(())
+}
+
+/// `n` truths in a row that applied a command that came back across the link.
+fn commanded_for(truths: &[Truth], n: usize) -> Option<()> {
+    truths
+        .windows(n)
+        .any(|w| w.iter().all(|t| t.cmd_latency_ns > 0))
+        .then_some(())
+}
+
+#[test]
+fn killing_either_bridge_stops_the_robot_until_the_link_is_back() {
+    let _serial = serial();
+    let before = shm_files();
+    // A killed bridge comes back after 2 s: longer than the 0.5 s after which the world stops
+    // the robot on a stale command.
+    let split = Split::start(
+        "split-faults",
+        &["--mode", "realtime", "--ticks", "100000"],
+        2000,
+    );
+    let (on_out, off_out) = (split.onboard.out.clone(), split.offboard.out.clone());
+    let both: [&Path; 2] = [&on_out, &off_out];
+    split
+        .onboard
+        .wait_for_log("world", "ready", Duration::from_secs(60));
+    let mut truth = TruthTap::open(&split.onboard.namespace);
+    truth.until(
+        "commands arrive across the link",
+        Duration::from_secs(30),
+        &both,
+        |t| commanded_for(t, 50),
+    );
+
+    for (side, namespace, out, peer_out) in [
+        ("on board", &split.onboard.namespace, &on_out, &off_out),
+        ("off board", &split.offboard.namespace, &off_out, &on_out),
+    ] {
+        let old =
+            pid_of(namespace, "mole-bridge").unwrap_or_else(|| panic!("{side}: no bridge running"));
+        signal(old, nix::sys::signal::Signal::SIGKILL);
+        truth.until(
+            &format!("{side} bridge killed: the robot stops"),
+            Duration::from_secs(20),
+            &both,
+            |t| stopped_for(t, 20),
+        );
+        wait_for_new_pid(
+            namespace,
+            "mole-bridge",
+            Some(old),
+            Duration::from_secs(30),
+            out,
+        );
+        truth.until(
+            &format!("{side} bridge back: commands again"),
+            Duration::from_secs(30),
+            &both,
+            |t| commanded_for(t, 50),
+        );
+        // The peer's bridge saw the link go and come back.
+        let peer_log =
+            std::fs::read_to_string(peer_out.join("logs/bridge.log")).unwrap_or_default();
+        assert!(
+            peer_log.contains("link down") && peer_log.matches("link up").count() >= 2,
+            "{side}: the peer bridge did not report the link going and coming back:\n{peer_log}"
+        );
+    }
+    let stopped = |stack: Stack| {
+        let out = stack.out.clone();
+        let keep = TempDir::new("split-faults-keep");
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(stack.pid() as i32),
+            nix::sys::signal::Signal::SIGINT,
+        )
+        .expect("SIGINT");
+        let output = stack.wait_and_copy(&keep.0, Duration::from_secs(60));
+        drop(out);
+        (output, keep)
+    };
+    drop(truth);
+    let Split {
+        onboard,
+        offboard,
+        _dir,
+    } = split;
+    let (on_output, _on_keep) = stopped(onboard);
+    let (_off_output, off_keep) = stopped(offboard);
+    // Each launcher reported its bridge's death and restarted it once.
+    let on_err = String::from_utf8_lossy(&on_output.stderr);
+    assert!(
+        on_err.contains("process restarted") && on_err.contains("bridge"),
+        "the on-board launcher reports the restart:\n{on_err}"
+    );
+    let off = summary(&off_keep.0);
+    assert_eq!(off.restarts.get("bridge"), Some(&1), "{off:#?}");
+    assert_eq!(
+        left_behind(&before),
+        Vec::<String>::new(),
+        "shared memory left behind"
+    );
+}
