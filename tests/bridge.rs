@@ -226,8 +226,17 @@ fn commanded_for(truths: &[Truth], n: usize) -> Option<()> {
         .then_some(())
 }
 
-#[test]
-fn killing_either_bridge_stops_the_robot_until_the_link_is_back() {
+/// Which half's bridge a fault test kills.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Side {
+    OnBoard,
+    OffBoard,
+}
+
+/// Kills `side`'s bridge mid-run (realtime): the launcher on that side restarts it, the other
+/// side's bridge reports the link going and coming back, the robot stands while the link is
+/// down (the world stops on a stale command) and goes on after.
+fn a_killed_bridge_stops_the_robot_until_the_link_is_back(side: Side) {
     let _serial = serial();
     let before = shm_files();
     // A killed bridge comes back after 2 s: longer than the 0.5 s after which the world stops
@@ -250,71 +259,79 @@ fn killing_either_bridge_stops_the_robot_until_the_link_is_back() {
         |t| commanded_for(t, 50),
     );
 
-    for (side, namespace, out, peer_out) in [
-        ("on board", &split.onboard.namespace, &on_out, &off_out),
-        ("off board", &split.offboard.namespace, &off_out, &on_out),
-    ] {
-        let old =
-            pid_of(namespace, "mole-bridge").unwrap_or_else(|| panic!("{side}: no bridge running"));
-        signal(old, nix::sys::signal::Signal::SIGKILL);
-        truth.until(
-            &format!("{side} bridge killed: the robot stops"),
-            Duration::from_secs(20),
-            &both,
-            |t| stopped_for(t, 20),
-        );
-        wait_for_new_pid(
-            namespace,
-            "mole-bridge",
-            Some(old),
-            Duration::from_secs(30),
-            out,
-        );
-        truth.until(
-            &format!("{side} bridge back: commands again"),
-            Duration::from_secs(30),
-            &both,
-            |t| commanded_for(t, 50),
-        );
-        // The peer's bridge saw the link go and come back.
-        let peer_log =
-            std::fs::read_to_string(peer_out.join("logs/bridge.log")).unwrap_or_default();
-        assert!(
-            peer_log.contains("link down") && peer_log.matches("link up").count() >= 2,
-            "{side}: the peer bridge did not report the link going and coming back:\n{peer_log}"
-        );
-    }
-    let stopped = |stack: Stack| {
-        let out = stack.out.clone();
-        let keep = TempDir::new("split-faults-keep");
-        nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(stack.pid() as i32),
-            nix::sys::signal::Signal::SIGINT,
-        )
-        .expect("SIGINT");
-        let output = stack.wait_and_copy(&keep.0, Duration::from_secs(60));
-        drop(out);
-        (output, keep)
+    let (killed, out, peer_out) = match side {
+        Side::OnBoard => (&split.onboard, &on_out, &off_out),
+        Side::OffBoard => (&split.offboard, &off_out, &on_out),
     };
+    let old = pid_of(&killed.namespace, "mole-bridge").expect("a bridge running");
+    signal(old, nix::sys::signal::Signal::SIGKILL);
+    truth.until(
+        "bridge killed: the robot stops",
+        Duration::from_secs(20),
+        &both,
+        |t| stopped_for(t, 20),
+    );
+    wait_for_new_pid(
+        &killed.namespace,
+        "mole-bridge",
+        Some(old),
+        Duration::from_secs(30),
+        out,
+    );
+    truth.until(
+        "bridge back: commands again",
+        Duration::from_secs(30),
+        &both,
+        |t| commanded_for(t, 50),
+    );
+    let peer_log = std::fs::read_to_string(peer_out.join("logs/bridge.log")).unwrap_or_default();
+    assert!(
+        peer_log.contains("link down") && peer_log.matches("link up").count() >= 2,
+        "the peer bridge did not report the link going and coming back:\n{peer_log}"
+    );
+
     drop(truth);
     let Split {
         onboard,
         offboard,
         _dir,
     } = split;
-    let (on_output, _on_keep) = stopped(onboard);
-    let (_off_output, off_keep) = stopped(offboard);
-    // Each launcher reported its bridge's death and restarted it once.
-    let on_err = String::from_utf8_lossy(&on_output.stderr);
-    assert!(
-        on_err.contains("process restarted") && on_err.contains("bridge"),
-        "the on-board launcher reports the restart:\n{on_err}"
-    );
+    let (on_output, _on_keep) = interrupt(onboard);
+    let (_off_output, off_keep) = interrupt(offboard);
+    // The launcher of the killed side reported the death and restarted the bridge once.
     let off = summary(&off_keep.0);
-    assert_eq!(off.restarts.get("bridge"), Some(&1), "{off:#?}");
+    match side {
+        Side::OnBoard => {
+            let on_err = String::from_utf8_lossy(&on_output.stderr);
+            assert!(
+                on_err.contains("process restarted") && on_err.contains("bridge"),
+                "the on-board launcher reports the restart:\n{on_err}"
+            );
+            assert_eq!(off.restarts.get("bridge"), Some(&0), "{off:#?}");
+        }
+        Side::OffBoard => assert_eq!(off.restarts.get("bridge"), Some(&1), "{off:#?}"),
+    }
     assert_eq!(
         left_behind(&before),
         Vec::<String>::new(),
         "shared memory left behind"
     );
+}
+
+/// Stops a half with Ctrl-C and keeps its output directory.
+fn interrupt(stack: Stack) -> (std::process::Output, TempDir) {
+    let keep = TempDir::new("split-faults-keep");
+    signal(stack.pid(), nix::sys::signal::Signal::SIGINT);
+    let output = stack.wait_and_copy(&keep.0, Duration::from_secs(60));
+    (output, keep)
+}
+
+#[test]
+fn killing_the_onboard_bridge_stops_the_robot_until_the_link_is_back() {
+    a_killed_bridge_stops_the_robot_until_the_link_is_back(Side::OnBoard);
+}
+
+#[test]
+fn killing_the_offboard_bridge_stops_the_robot_until_the_link_is_back() {
+    a_killed_bridge_stops_the_robot_until_the_link_is_back(Side::OffBoard);
 }
