@@ -12,15 +12,16 @@
 //! a stack whose world depends on its bridge starts stepping with both halves listening.
 
 use clap::Parser;
-use mole_bridge::{BridgeSpec, Delivery, Forward, Forwarding, Tls, delivery, descriptor, key_expr};
+use mole_bridge::{
+    BridgeSpec, Delivery, Entry, Forward, Forwarding, Tls, delivery, descriptor, key_expr,
+};
 use mole_runtime::{BadInput, CommonArgs, Context, Publisher, Ringer, Subscriber};
 use mole_runtime::{Wake, Waker, layout_mismatch};
 use mole_types::topics::{self, TopicVisitor};
 use mole_types::{Message, Topic};
-use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
@@ -80,7 +81,8 @@ fn run(args: &Args) -> Result<(), Failed> {
         .wait()
         .map_err(|e| BadInput(format!("cannot open the zenoh session: {e}")))?;
     let ringer = ctx.ringer()?;
-    let inbox = Arc::new(Inbox::new(&ringer));
+    let wake = ringer.clone();
+    let inbox = Arc::new(Inbox::new(move || wake.ring()));
     let link = Link::watch(&session, &spec.peer_namespace, &ringer)?;
     let mut outs = open_outs(&ctx, &session, &spec)?;
     let mut ins = open_ins(&ctx, &session, &spec, &inbox)?;
@@ -114,7 +116,7 @@ fn run(args: &Args) -> Result<(), Failed> {
             ask_history(&session, &spec.peer_namespace, &ins, &inbox);
         }
         while let Some(entry) = inbox.pop() {
-            ins[entry.topic].forward(&entry.sample, entry.history)?;
+            ins[entry.topic].forward(&entry.item, entry.history)?;
         }
     }
 }
@@ -335,66 +337,8 @@ fn qos(delivery: Delivery) -> (CongestionControl, Priority, bool) {
 // ---------------------------------------------------------------------------------------------
 // In: the peer's topics, here.
 
-/// A sample from the peer waiting for the bridge's thread.
-struct Entry {
-    /// Index into the in topics.
-    topic: usize,
-    sample: Sample,
-    /// A reply to a history request rather than a live sample.
-    history: bool,
-}
-
-/// Samples from the peer in arrival order, filled by zenoh's threads, emptied by the bridge's.
-/// A reliable topic's sample waits for room (a full inbox holds the peer back through zenoh, as
-/// a full queue holds a publisher back in lockstep); a realtime bulk topic's replaces its
-/// predecessor still waiting.
-struct Inbox {
-    entries: Mutex<VecDeque<Entry>>,
-    room: Condvar,
-    ringer: Ringer,
-}
-
-/// Samples the inbox holds before a reliable one waits for room.
-const INBOX_CAPACITY: usize = 256;
-
-impl Inbox {
-    fn new(ringer: &Ringer) -> Inbox {
-        Inbox {
-            entries: Mutex::new(VecDeque::with_capacity(INBOX_CAPACITY)),
-            room: Condvar::new(),
-            ringer: ringer.clone(),
-        }
-    }
-
-    fn push(&self, entry: Entry, newest_only: bool) {
-        let mut entries = self.entries.lock().unwrap_or_else(|e| e.into_inner());
-        if newest_only {
-            entries.retain(|e| e.topic != entry.topic);
-        } else {
-            while entries.len() >= INBOX_CAPACITY {
-                // Bounded so that a bridge that exits never leaves zenoh's thread waiting.
-                entries = self
-                    .room
-                    .wait_timeout(entries, Duration::from_millis(100))
-                    .unwrap_or_else(|e| e.into_inner())
-                    .0;
-            }
-        }
-        entries.push_back(entry);
-        drop(entries);
-        self.ringer.ring();
-    }
-
-    fn pop(&self) -> Option<Entry> {
-        let entry = self
-            .entries
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .pop_front();
-        self.room.notify_one();
-        entry
-    }
-}
+/// What zenoh's threads leave for the bridge's: samples from the peer, in arrival order.
+type Inbox = mole_bridge::Inbox<Sample>;
 
 /// A topic from the peer, whatever its message type.
 trait In {
@@ -489,7 +433,7 @@ fn open_ins(
                 .callback(move |sample| {
                     let entry = Entry {
                         topic: index,
-                        sample,
+                        item: sample,
                         history: false,
                     };
                     inbox.push(entry, newest_only);
@@ -545,7 +489,7 @@ fn ask_history(session: &zenoh::Session, peer: &str, ins: &[Box<dyn In>], inbox:
                 if let Ok(sample) = reply.result() {
                     let entry = Entry {
                         topic: index,
-                        sample: sample.clone(),
+                        item: sample.clone(),
                         history: true,
                     };
                     inbox.push(entry, false);
