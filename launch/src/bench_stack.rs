@@ -27,6 +27,11 @@ pub struct BenchStackArgs {
     /// With --targets: how many steps the lockstep run takes.
     #[arg(long, default_value_t = 20_000)]
     pub lockstep_ticks: u64,
+    /// Run the stack split in two over the bridge (launch/stacks/split: the on-board half in a
+    /// `mole up` of its own, the off-board half here) and, with the same settings, on one host;
+    /// prints both loops and steps/s and their ratio. The launch file given is the one-host run's.
+    #[arg(long, conflicts_with = "targets")]
+    pub split: bool,
 }
 
 /// The report of one stack run.
@@ -55,6 +60,9 @@ pub fn bench_stack(args: &BenchStackArgs) -> Result<(), Failure> {
     }
     if args.targets {
         return bench_targets(args).map(drop);
+    }
+    if args.split {
+        return bench_split(args).map(drop);
     }
     let report = run_stack(&args.up)?;
     print!("{}", render(&report));
@@ -179,7 +187,7 @@ pub fn bench_targets(args: &BenchStackArgs) -> Result<TargetsReport, Failure> {
 /// The options of this `mole bench stack --targets` that a stack run takes too: all but those
 /// the targets set themselves.
 fn forwarded_options() -> Vec<String> {
-    const SET_HERE: [&str; 8] = [
+    options_but(&[
         "--json",
         "--out",
         "--mode",
@@ -188,15 +196,20 @@ fn forwarded_options() -> Vec<String> {
         "--namespace",
         "--realtime-secs",
         "--lockstep-ticks",
-    ];
+    ])
+}
+
+/// The options this `mole bench stack` was given, without `--targets`, `--split` and the
+/// options (with their values) named in `set_here`.
+fn options_but(set_here: &[&str]) -> Vec<String> {
     let mut forwarded = Vec::new();
     let mut options = std::env::args().skip_while(|a| a != "stack").skip(1);
     while let Some(option) = options.next() {
         let name = option.split('=').next().unwrap_or_default();
-        if option == "--targets" {
+        if option == "--targets" || option == "--split" {
             continue;
         }
-        if SET_HERE.contains(&name) {
+        if set_here.contains(&name) {
             if !option.contains('=') {
                 options.next();
             }
@@ -370,6 +383,310 @@ fn render_targets(r: &TargetsReport) -> String {
     s
 }
 
+// ---------------------------------------------------------------------------------------------
+// `--split`: one stack on two "machines" (two namespaces joined by their bridges) against the
+// same stack on one host.
+
+/// The split run next to the one-host run of the same settings.
+#[derive(Debug, Clone, Serialize)]
+pub struct SplitReport {
+    /// The one-host run: its `mole bench stack --json` report.
+    pub single: serde_json::Value,
+    /// The off-board half's report (it has the monitor: the loop runs through both bridges).
+    pub split: StackReport,
+    /// The namespaces the halves ran in (on board, off board) and the bridge's endpoint.
+    pub onboard_namespace: String,
+    pub offboard_namespace: String,
+    pub endpoint: String,
+    pub figures: SplitFigures,
+}
+
+/// Loop latency and steps/s of both runs, and split / single.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct SplitFigures {
+    pub single_loop_p50_us: f64,
+    pub single_loop_p99_us: f64,
+    pub single_steps_per_s: f64,
+    pub split_loop_p50_us: f64,
+    pub split_loop_p99_us: f64,
+    pub split_steps_per_s: f64,
+    pub loop_p50_ratio: f64,
+    pub loop_p99_ratio: f64,
+    pub steps_per_s_ratio: f64,
+}
+
+/// The on-board half's `mole up`, interrupted (then killed) if it is still running when the
+/// split run ends, however it ends.
+struct OnboardHalf(std::process::Child);
+
+impl Drop for OnboardHalf {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let pid = nix::unistd::Pid::from_raw(self.0.id() as i32);
+            let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT);
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(15);
+            while matches!(self.0.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            let _ = self.0.kill();
+        }
+        let _ = self.0.wait();
+    }
+}
+
+/// One of launch/stacks/split's files, from the current directory or this crate's.
+fn split_file(half: &str) -> PathBuf {
+    let relative = PathBuf::from(format!("launch/stacks/split/{half}.toml"));
+    if relative.exists() {
+        return relative;
+    }
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("stacks/split/{half}.toml"))
+}
+
+/// A copy of a split half's launch file for this run: the peer's namespace `peer`, every
+/// endpoint on `port`, the scenario's path absolute (the copy lives elsewhere).
+fn split_copy(original: &std::path::Path, peer: &str, port: u16) -> Result<String, Failure> {
+    let bad = |why: String| Failure::input(format!("{}: {why}", original.display()));
+    let text = std::fs::read_to_string(original).map_err(|e| bad(e.to_string()))?;
+    let mut table: toml::Table = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let stack = table
+        .get_mut("stack")
+        .and_then(toml::Value::as_table_mut)
+        .ok_or_else(|| bad("no [stack] table".to_owned()))?;
+    if let Some(toml::Value::String(scenario)) = stack.get_mut("scenario") {
+        let cwd = std::env::current_dir().map_err(|e| bad(e.to_string()))?;
+        let found = crate::resolve_data_path("scenario", scenario.as_ref(), original, &cwd)
+            .map_err(|e| bad(e.to_string()))?;
+        let absolute = std::path::absolute(&found).map_err(|e| bad(e.to_string()))?;
+        *scenario = absolute.display().to_string();
+    }
+    let bridge = table
+        .get_mut("bridge")
+        .and_then(toml::Value::as_table_mut)
+        .ok_or_else(|| bad("no [bridge] table".to_owned()))?;
+    bridge.insert("peer_namespace".to_owned(), peer.into());
+    let mut endpoints = 0;
+    for side in ["listen", "connect"] {
+        let Some(list) = bridge.get_mut(side).and_then(toml::Value::as_array_mut) else {
+            continue;
+        };
+        for endpoint in list {
+            let moved = endpoint
+                .as_str()
+                .and_then(|e| e.rsplit_once(':'))
+                .map(|(host, _)| format!("{host}:{port}"))
+                .ok_or_else(|| bad(format!("bridge.{side}: {endpoint} is not HOST:PORT")))?;
+            *endpoint = moved.into();
+            endpoints += 1;
+        }
+    }
+    if endpoints == 0 {
+        return Err(bad("the bridge neither listens nor connects".to_owned()));
+    }
+    toml::to_string(&table).map_err(|e| bad(e.to_string()))
+}
+
+/// The `mole up` options that make the on-board half run like this one: clock mode, length,
+/// seed, scenario, planners, estimator, goal.
+fn stack_options(up: &UpArgs) -> Vec<String> {
+    let mut options = Vec::new();
+    let mut add = |flag: &str, value: Option<String>| {
+        if let Some(value) = value {
+            options.push(format!("--{flag}={value}"));
+        }
+    };
+    add("mode", up.mode.map(|m| m.to_string()));
+    add("ticks", up.ticks.map(|t| t.to_string()));
+    add("duration", up.duration.map(|d| d.to_string()));
+    add("seed", up.seed.map(|s| s.to_string()));
+    add("planner", up.planner.map(|p| p.to_string()));
+    add("local-planner", up.local_planner.map(|p| p.to_string()));
+    add("estimator", up.estimator.map(|e| e.to_string()));
+    add("goal", up.goal.map(|(x, y)| format!("{x},{y}")));
+    add(
+        "scenario",
+        up.scenario.as_ref().map(|s| s.display().to_string()),
+    );
+    options
+}
+
+/// Runs the stack on one host (in a `mole bench stack` of its own), then split: the on-board
+/// half in a child `mole up`, the off-board half here; prints both and their ratios.
+pub fn bench_split(args: &BenchStackArgs) -> Result<SplitReport, Failure> {
+    let namespace = &args.up.namespace;
+    let (on_ns, off_ns) = (
+        format!("{namespace}-onboard"),
+        format!("{namespace}-offboard"),
+    );
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map_err(|e| Failure::run(format!("no free TCP port on 127.0.0.1: {e}")))?
+        .port();
+    let dir = args.up.out.join("split");
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::input(format!("cannot create {}: {e}", dir.display())))?;
+    let mut files = Vec::new();
+    for (half, peer) in [("onboard", &off_ns), ("offboard", &on_ns)] {
+        let copy = dir.join(format!("{half}.toml"));
+        let text = split_copy(&split_file(half), peer, port)?;
+        std::fs::write(&copy, text)
+            .map_err(|e| Failure::input(format!("cannot write {}: {e}", copy.display())))?;
+        files.push(copy);
+    }
+
+    let single = run_single_child(args)?;
+
+    let exe = std::env::current_exe().map_err(|e| Failure::run(e.to_string()))?;
+    let onboard_out = dir.join("onboard");
+    let mut onboard = std::process::Command::new(exe);
+    onboard
+        .arg("up")
+        .arg(&files[0])
+        .arg(format!("--namespace={on_ns}"))
+        .arg("--out")
+        .arg(&onboard_out)
+        .arg("--quiet")
+        .args(stack_options(&args.up))
+        .stdout(std::process::Stdio::null());
+    let mut onboard = OnboardHalf(
+        onboard
+            .spawn()
+            .map_err(|e| Failure::run(format!("cannot start the on-board half: {e}")))?,
+    );
+    let mut offboard = args.up.clone();
+    offboard.launch = Some(files[1].clone());
+    offboard.namespace = off_ns.clone();
+    offboard.out = dir.join("offboard");
+    let split = run_stack(&offboard)?;
+    let onboard_end = wait_for(&mut onboard.0, std::time::Duration::from_secs(30));
+    if !onboard_end.is_some_and(|s| s.success()) {
+        return Err(Failure::run(format!(
+            "the on-board half did not end well ({}); see {}",
+            onboard_end.map_or(
+                "still running after the off-board half ended".to_owned(),
+                |s| s.to_string()
+            ),
+            onboard_out.display()
+        )));
+    }
+    let figures = split_figures(&single, &split);
+    let report = SplitReport {
+        single,
+        split,
+        onboard_namespace: on_ns,
+        offboard_namespace: off_ns,
+        endpoint: format!("tcp/127.0.0.1:{port}"),
+        figures,
+    };
+    print!("{}", render(&report.split));
+    print!("{}", render_split(&report));
+    write_json(args.json.as_deref(), &report)?;
+    Ok(report)
+}
+
+/// Waits up to `patience` for `child` to end; its status, or `None` if it is still running.
+fn wait_for(
+    child: &mut std::process::Child,
+    patience: std::time::Duration,
+) -> Option<std::process::ExitStatus> {
+    let deadline = std::time::Instant::now() + patience;
+    loop {
+        match child.try_wait() {
+            Ok(Some(status)) => return Some(status),
+            Ok(None) if std::time::Instant::now() < deadline => {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            _ => return None,
+        }
+    }
+}
+
+/// The one-host run of `--split`: a `mole bench stack` of its own with every option of this one
+/// but the output paths and the namespace.
+fn run_single_child(args: &BenchStackArgs) -> Result<serde_json::Value, Failure> {
+    let out = args.up.out.join("single");
+    std::fs::create_dir_all(&out)
+        .map_err(|e| Failure::input(format!("cannot create {}: {e}", out.display())))?;
+    let json = out.join("bench.json");
+    let exe = std::env::current_exe().map_err(|e| Failure::run(e.to_string()))?;
+    let status = std::process::Command::new(exe)
+        .args(["bench", "stack"])
+        .arg(format!("--namespace={}-single", args.up.namespace))
+        .arg("--out")
+        .arg(&out)
+        .arg("--json")
+        .arg(&json)
+        .args(options_but(&["--json", "--out", "--namespace"]))
+        .stdout(std::process::Stdio::null())
+        .status()
+        .map_err(|e| Failure::run(format!("cannot start the one-host run: {e}")))?;
+    if !status.success() {
+        return Err(Failure::run(format!("the one-host run failed: {status}")));
+    }
+    let text = std::fs::read_to_string(&json)
+        .map_err(|e| Failure::run(format!("no report of the one-host run: {e}")))?;
+    serde_json::from_str(&text)
+        .map_err(|e| Failure::run(format!("the one-host run's report is unreadable: {e}")))
+}
+
+/// Both runs' loop latency and steps/s, and split / single (NaN where single is 0).
+fn split_figures(single: &serde_json::Value, split: &StackReport) -> SplitFigures {
+    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+    let lat = &split.loop_latency_us;
+    let mut f = SplitFigures {
+        single_loop_p50_us: number(&single["loop_latency_us"]["p50"]),
+        single_loop_p99_us: number(&single["loop_latency_us"]["p99"]),
+        single_steps_per_s: number(&single["steps_per_s"]),
+        split_loop_p50_us: lat.p50.unwrap_or(0.0),
+        split_loop_p99_us: lat.p99.unwrap_or(0.0),
+        split_steps_per_s: split.steps_per_s,
+        ..SplitFigures::default()
+    };
+    f.loop_p50_ratio = ratio(f.split_loop_p50_us, f.single_loop_p50_us);
+    f.loop_p99_ratio = ratio(f.split_loop_p99_us, f.single_loop_p99_us);
+    f.steps_per_s_ratio = ratio(f.split_steps_per_s, f.single_steps_per_s);
+    f
+}
+
+/// The two runs side by side.
+fn render_split(r: &SplitReport) -> String {
+    let f = &r.figures;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "\n{} run, one host against split in two (on board `{}`, off board `{}`, bridges over {})",
+        r.split.mode, r.onboard_namespace, r.offboard_namespace, r.endpoint
+    );
+    let _ = writeln!(
+        s,
+        "{:<14} {:>12} {:>12} {:>14}",
+        "", "one host", "split", "split / one"
+    );
+    for (what, single, split, ratio) in [
+        (
+            "loop p50 µs",
+            f.single_loop_p50_us,
+            f.split_loop_p50_us,
+            f.loop_p50_ratio,
+        ),
+        (
+            "loop p99 µs",
+            f.single_loop_p99_us,
+            f.split_loop_p99_us,
+            f.loop_p99_ratio,
+        ),
+        (
+            "steps/s",
+            f.single_steps_per_s,
+            f.split_steps_per_s,
+            f.steps_per_s_ratio,
+        ),
+    ] {
+        let _ = writeln!(s, "{what:<14} {single:>12.1} {split:>12.1} {ratio:>14.2}");
+    }
+    s
+}
+
 /// Fails early (exit 2) when the report could not be written at the end.
 pub fn check_writable(path: &std::path::Path) -> Result<(), Failure> {
     let dir = match path.parent() {
@@ -442,6 +759,30 @@ fn render(r: &StackReport) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The split half's copy names the run's peer namespace, moves every endpoint to the
+    /// run's port and keeps the scenario findable from anywhere.
+    #[test]
+    fn a_split_copy_meets_its_peer_on_the_runs_port() {
+        let copy = split_copy(&split_file("offboard"), "bench-onboard", 40123).expect("a copy");
+        let table: toml::Table = toml::from_str(&copy).expect("TOML");
+        let bridge = &table["bridge"];
+        assert_eq!(bridge["peer_namespace"].as_str(), Some("bench-onboard"));
+        assert_eq!(
+            bridge["connect"].as_array().expect("connect")[0].as_str(),
+            Some("tcp/127.0.0.1:40123")
+        );
+        let scenario = PathBuf::from(table["stack"]["scenario"].as_str().expect("scenario"));
+        assert!(
+            scenario.is_absolute() && scenario.is_file(),
+            "{}",
+            scenario.display()
+        );
+        let crate::LaunchFile { bridge, .. } =
+            crate::parse_launch_file(&copy, std::path::Path::new("offboard.toml"))
+                .expect("the copy is a valid launch file");
+        assert_eq!(bridge.expect("a bridge").peer_namespace, "bench-onboard");
+    }
 
     /// Each target divides the figures issue #13 names and says whether its bound holds.
     #[test]

@@ -481,6 +481,7 @@ impl Driver<'_> {
             chain: Vec::new(),
             floor: Vec::new(),
             ratios: Vec::new(),
+            zenoh: None,
         };
         for placement in [Placement::Same, Placement::Other] {
             for rate_hz in [None, Some(c.floor_rate_hz)] {

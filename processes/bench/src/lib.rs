@@ -386,6 +386,43 @@ pub struct IpcReport {
     /// smallest to the largest size, Unix socket / runtime at 1 MiB, each event-woken hop of
     /// the runtime and raw iceoryx2 / the pipe floor.
     pub ratios: Vec<Ratio>,
+    /// zenoh over loopback TCP (`mole bench ipc` adds it from mole-bridge's `mole-zenoh-bench`);
+    /// `None`: not measured.
+    pub zenoh: Option<ZenohReport>,
+}
+
+/// zenoh between two processes over loopback TCP: what a stack split by `mole-bridge` pays
+/// per message on one machine, next to the shared-memory transports.
+#[derive(Debug, Clone, Serialize)]
+pub struct ZenohReport {
+    /// How it was measured (sessions, processes, QoS), printed as the table's note.
+    pub setup: String,
+    /// One-way latency (round trip / 2) per payload size.
+    pub latency: Vec<ZenohLatencyPoint>,
+    /// One publisher flat out at the largest size.
+    pub throughput: ZenohThroughput,
+}
+
+/// zenoh's one-way latency at one payload size: half of each ping-pong round trip.
+#[derive(Debug, Clone, Serialize)]
+pub struct ZenohLatencyPoint {
+    pub size: usize,
+    pub latency: Summary,
+}
+
+/// zenoh's throughput: one publisher flat out (CongestionControl::Block: it waits rather than
+/// drops, so every message sent arrives).
+#[derive(Debug, Clone, Serialize)]
+pub struct ZenohThroughput {
+    pub size: usize,
+    pub sent: u64,
+    pub received: u64,
+    /// Messages sent per second of sending.
+    pub sent_per_s: f64,
+    /// Messages received per second, first to last receipt.
+    pub received_per_s: f64,
+    /// Received megabytes (10⁶ B) per second.
+    pub megabytes_per_s: f64,
 }
 
 #[cfg(test)]

@@ -1,6 +1,6 @@
 //! The report as a text table and as a hand-written SVG plot (p50 vs payload size, log-log).
 
-use crate::{BenchError, IpcReport, Summary};
+use crate::{BenchError, IpcReport, Summary, Transport, ZenohReport};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -111,6 +111,9 @@ pub fn format_table(report: &IpcReport) -> String {
             p.received
         );
     }
+    if let Some(zenoh) = &report.zenoh {
+        zenoh_rows(&mut t, report, zenoh, &head);
+    }
     let _ = writeln!(
         t,
         "\nfan-out, latency to the last subscriber (event wake-up)\n{:<13} {:>5} {:>8} {head}",
@@ -145,6 +148,51 @@ pub fn format_table(report: &IpcReport) -> String {
         let _ = writeln!(t, "  {:<60} {:>8.2}", r.what, r.value);
     }
     t
+}
+
+/// zenoh's rows: latency by size beside the TCP socket's p50, throughput, and how it ran.
+fn zenoh_rows(t: &mut String, report: &IpcReport, zenoh: &ZenohReport, head: &str) {
+    let _ = writeln!(
+        t,
+        "\nzenoh over loopback TCP, one-way latency (round trip / 2)\n{:<13} {:>8} {head} {:>13}",
+        "transport", "size", "÷ tcp p50"
+    );
+    for p in &zenoh.latency {
+        let tcp = report
+            .latency
+            .iter()
+            .find(|l| l.transport == Transport::Tcp && l.size == p.size)
+            .filter(|l| l.latency.p50_us > 0.0)
+            .map_or("-".to_string(), |l| {
+                format!("{:.2}", p.latency.p50_us / l.latency.p50_us)
+            });
+        let _ = writeln!(
+            t,
+            "{:<13} {:>8} {} {:>13}",
+            "zenoh tcp",
+            size_label(p.size),
+            summary_cells(&p.latency),
+            tcp
+        );
+    }
+    let r = &zenoh.throughput;
+    let _ = writeln!(
+        t,
+        "{:<13} {:>8} {:>12} {:>12} {:>12} {:>12}\n{:<13} {:>8} {:>12} {:>12} {:>12.1} {:>12}",
+        "throughput",
+        "size",
+        "sent msg/s",
+        "recv msg/s",
+        "recv MB/s",
+        "received",
+        "zenoh tcp",
+        size_label(r.size),
+        rate_label(r.sent_per_s),
+        rate_label(r.received_per_s),
+        r.megabytes_per_s,
+        r.received
+    );
+    let _ = writeln!(t, "note: {}", zenoh.setup);
 }
 
 /// Prints [`format_table`] to standard output (for `mole bench ipc`).
@@ -423,6 +471,7 @@ mod tests {
             chain,
             floor,
             ratios: Vec::new(),
+            zenoh: None,
         };
         r.ratios = crate::driver::ratios(&r);
         r
@@ -515,6 +564,50 @@ mod tests {
         assert!(render_svg(&empty).contains("</svg>"));
         empty.floor.clear();
         assert!(render_svg(&empty).contains("</svg>"));
+    }
+
+    /// zenoh's rows sit beside the TCP socket's p50 at the same size, with the throughput in
+    /// MB/s and the note on how it ran; without a zenoh run there is no zenoh section.
+    #[test]
+    fn zenoh_rows_compare_with_the_tcp_socket() {
+        let mut r = report();
+        assert!(!format_table(&r).contains("zenoh"));
+        r.latency.push(LatencyPoint {
+            transport: Transport::Tcp,
+            wake: WakeMode::Blocking,
+            size: 64,
+            latency: summary(20.0),
+            handoff: summary(20.0),
+            fill: summary(0.1),
+        });
+        r.zenoh = Some(crate::ZenohReport {
+            setup: "two processes, peer mode".to_string(),
+            latency: [64, 1 << 20]
+                .into_iter()
+                .map(|size| crate::ZenohLatencyPoint {
+                    size,
+                    latency: summary(50.0),
+                })
+                .collect(),
+            throughput: crate::ZenohThroughput {
+                size: 1 << 20,
+                sent: 100,
+                received: 100,
+                sent_per_s: 1000.0,
+                received_per_s: 1000.0,
+                megabytes_per_s: 1048.6,
+            },
+        });
+        let table = format_table(&r);
+        let rows: Vec<&str> = table
+            .lines()
+            .filter(|l| l.starts_with("zenoh tcp"))
+            .collect();
+        assert_eq!(rows.len(), 3, "{table}");
+        assert!(rows[0].contains("64 B") && rows[0].trim_end().ends_with("2.50"));
+        assert!(rows[1].contains("1 MiB") && rows[1].trim_end().ends_with('-'));
+        assert!(rows[2].contains("1048.6") && rows[2].contains("1.0 k"));
+        assert!(table.contains("note: two processes, peer mode"));
     }
 
     #[test]
