@@ -78,19 +78,6 @@ fn lockstep_run(test: &str, ticks: u64, seed: u64, record: bool) -> Run {
     run
 }
 
-/// A lockstep summary without what differs from run to run (wall time, latencies, wall-clock
-/// rates): what the scenario and seed alone decide.
-fn deterministic(summary: &Summary) -> Summary {
-    Summary {
-        wall_time_s: 0.0,
-        launcher_wall_time_s: None,
-        loop_latency_us: Default::default(),
-        estimator_update_us: Default::default(),
-        topics: Default::default(),
-        ..summary.clone()
-    }
-}
-
 /// Every message a streaming reader gets from `bytes` before the first error, as (topic,
 /// log time, payload).
 fn stream(bytes: &[u8]) -> Vec<(String, u64, Vec<u8>)> {

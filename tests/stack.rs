@@ -143,19 +143,6 @@ fn lockstep_run_explores_without_penetrating_and_reports_every_field() {
     );
 }
 
-/// A lockstep summary without what differs from run to run (wall time, latencies, wall-clock
-/// rates): what the scenario and seed alone decide.
-fn deterministic(summary: &Summary) -> Summary {
-    Summary {
-        wall_time_s: 0.0,
-        launcher_wall_time_s: None,
-        loop_latency_us: Default::default(),
-        estimator_update_us: Default::default(),
-        topics: Default::default(),
-        ..summary.clone()
-    }
-}
-
 #[test]
 fn two_lockstep_runs_with_the_same_seed_are_identical() {
     let _serial = serial();

@@ -287,6 +287,19 @@ pub fn logs(out: &Path) -> String {
     text
 }
 
+/// A lockstep summary without what differs from run to run (wall time, latencies, wall-clock
+/// rates): what the scenario and seed alone decide.
+pub fn deterministic(summary: &Summary) -> Summary {
+    Summary {
+        wall_time_s: 0.0,
+        launcher_wall_time_s: None,
+        loop_latency_us: Default::default(),
+        estimator_update_us: Default::default(),
+        topics: Default::default(),
+        ..summary.clone()
+    }
+}
+
 /// Reads a run's summary.json into the schema the monitor and the launcher write.
 pub fn summary(out: &Path) -> Summary {
     let path = out.join("summary.json");
