@@ -358,22 +358,18 @@ mod tests {
     #[test]
     fn docs_process_table_matches_the_graph() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/architecture.md");
-        let doc = std::fs::read_to_string(path).expect("read docs/architecture.md");
-        let start = doc.find("| process |").expect("a process table");
-        let end = doc[start..]
-            .find("\n\n")
-            .map_or(doc.len(), |n| start + n + 1);
-        let expected = markdown();
-        if std::env::var_os("MOLE_BLESS").is_some() {
-            let blessed = format!("{}{expected}{}", &doc[..start], &doc[end..]);
-            std::fs::write(path, blessed).expect("write docs/architecture.md");
-            return;
-        }
-        assert_eq!(
-            &doc[start..end],
-            expected,
-            "docs/architecture.md's process table differs from the graph: regenerate it with \
-             `MOLE_BLESS=1 cargo test -p mole-types graph`"
+        let table = |doc: &str| {
+            let start = doc.find("| process |")?;
+            let end = doc[start..]
+                .find("\n\n")
+                .map_or(doc.len(), |n| start + n + 1);
+            Some(start..end)
+        };
+        crate::golden::check(
+            path.as_ref(),
+            &markdown(),
+            table,
+            "cargo test -p mole-types graph",
         );
     }
 }

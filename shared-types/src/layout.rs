@@ -538,15 +538,11 @@ mod tests {
     #[test]
     fn docs_messages_md_matches_the_code() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/messages.md");
-        let expected = markdown();
-        if std::env::var_os("MOLE_BLESS").is_some() {
-            std::fs::write(path, &expected).expect("write docs/messages.md");
-        }
-        let actual = std::fs::read_to_string(path).unwrap_or_default();
-        assert!(
-            actual == expected,
-            "docs/messages.md differs from the code: regenerate it with \
-             `MOLE_BLESS=1 cargo test -p mole-types` and review the diff"
+        crate::golden::check(
+            path.as_ref(),
+            &markdown(),
+            crate::golden::whole,
+            "cargo test -p mole-types",
         );
     }
     #[test]
@@ -555,16 +551,11 @@ mod tests {
             env!("CARGO_MANIFEST_DIR"),
             "/../examples/python_planner/mole_messages.py"
         );
-        let expected = python_ctypes();
-        if std::env::var_os("MOLE_BLESS").is_some() {
-            std::fs::write(path, &expected)
-                .expect("write examples/python_planner/mole_messages.py");
-        }
-        let actual = std::fs::read_to_string(path).unwrap_or_default();
-        assert!(
-            actual == expected,
-            "examples/python_planner/mole_messages.py differs from the code: regenerate it with \
-             `MOLE_BLESS=1 cargo test -p mole-types` and review the diff"
+        crate::golden::check(
+            path.as_ref(),
+            &python_ctypes(),
+            crate::golden::whole,
+            "cargo test -p mole-types",
         );
     }
 

@@ -9,6 +9,7 @@
 pub mod control;
 pub mod env;
 pub mod geometry;
+pub mod golden;
 #[macro_use]
 pub mod kinds;
 pub mod graph;

@@ -1014,15 +1014,11 @@ mod tests {
             env!("CARGO_MANIFEST_DIR"),
             "/../../examples/python_planner/step_rules.json"
         );
-        let expected = rule_table();
-        if std::env::var_os("MOLE_BLESS").is_some() {
-            std::fs::write(path, &expected).expect("write examples/python_planner/step_rules.json");
-        }
-        let actual = std::fs::read_to_string(path).unwrap_or_default();
-        assert!(
-            actual == expected,
-            "examples/python_planner/step_rules.json differs from the step rules: regenerate it \
-             with `MOLE_BLESS=1 cargo test -p mole-runtime --lib step` and review the diff"
+        mole_types::golden::check(
+            path.as_ref(),
+            &rule_table(),
+            mole_types::golden::whole,
+            "cargo test -p mole-runtime --lib step",
         );
     }
 }
