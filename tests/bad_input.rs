@@ -147,6 +147,27 @@ fn a_malformed_scenario_names_file_line_field_and_what_was_expected() {
     assert_eq!(output.status.code(), Some(2), "{}", stderr_of(&output));
 }
 
+/// An empty scenario and a file of NUL bytes are the wrong file, not the default arena: each is
+/// refused before anything starts, naming the file and what is wrong with it.
+#[test]
+fn an_empty_or_binary_scenario_is_refused() {
+    for (name, text, why) in [
+        ("empty.toml", "", "the scenario sets nothing"),
+        ("nul.toml", "\0\0\0\0\0\0\0\0", "not a text file"),
+    ] {
+        let path = write_temp(name, text);
+        let output = refused_up("odd-scenario", &["--scenario", path.to_str().unwrap()]);
+        let _ = std::fs::remove_file(&path);
+        let err = stderr_of(&output);
+        assert_eq!(output.status.code(), Some(2), "{name}: {err}");
+        assert!(
+            err.contains(&path.display().to_string()),
+            "names the file: {err}"
+        );
+        assert!(err.contains(why), "{name}: {err}");
+    }
+}
+
 /// A planner or an estimator the stack does not have is refused before anything starts, exit
 /// 2, naming every valid choice.
 #[test]

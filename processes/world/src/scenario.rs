@@ -887,8 +887,32 @@ pub fn parse_scenario(text: &str, path: &Path) -> Result<Scenario, ScenarioError
         location: Location::at(path, text, e.span().map(|s| s.start)),
         message: e.message().trim().to_string(),
     };
+    // A binary file and an empty one are wrong files, not a request for the default arena (every
+    // field has a default, so either would otherwise run silently).
+    if let Some((offset, c)) = text
+        .char_indices()
+        .find(|(_, c)| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+    {
+        return Err(ScenarioError::Structure {
+            location: Location::at(path, text, Some(offset)),
+            message: format!(
+                "not a text file (control character U+{:04X}): expected a TOML scenario",
+                u32::from(c)
+            ),
+        });
+    }
     let document = toml::de::DeTable::parse(text).map_err(syntax)?;
     let root = DeValue::Table(document.into_inner());
+    if let DeValue::Table(table) = &root
+        && table.is_empty()
+    {
+        return Err(ScenarioError::Structure {
+            location: Location::at(path, text, None),
+            message: "the scenario sets nothing: expected a TOML scenario with at least one \
+                      field (scenarios/default.toml documents them)"
+                .into(),
+        });
+    }
     let deserializer = toml::de::Deserializer::parse(text).map_err(syntax)?;
     let file: File = serde_path_to_error::deserialize(deserializer).map_err(|e| {
         let field = e.path().to_string();
@@ -964,9 +988,32 @@ mod tests {
         }
     }
 
+    /// An empty file, one of comments only and a binary one are wrong files, refused naming
+    /// the file (and where the first control character is), never the default arena.
     #[test]
-    fn empty_file_is_the_documented_default() {
-        let s = parse("").unwrap();
+    fn empty_and_binary_files_are_refused() {
+        for empty in ["", "\n  \n", "# a scenario\n"] {
+            let e = err(empty);
+            assert!(
+                e.starts_with("scenarios/x.toml: the scenario sets nothing"),
+                "{e}"
+            );
+        }
+        let e = err("\0\0\0\0");
+        assert!(
+            e.starts_with("scenarios/x.toml:1:1: not a text file (control character U+0000)"),
+            "{e}"
+        );
+        let e = err("name = \"x\"\n\u{7f}");
+        assert!(
+            e.starts_with("scenarios/x.toml:2:1: not a text file (control character U+007F)"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_file_that_sets_no_value_is_the_documented_default() {
+        let s = parse("[sim]\n").unwrap();
         assert_eq!(s.name, "x");
         assert_eq!(s.dt, 0.01);
         assert_eq!(s.seed, 0);
@@ -1245,7 +1292,7 @@ period_ticks = 0
     #[test]
     fn anonymous_beacons_switch_travels_in_the_world_map() {
         let mut map: Box<WorldMap> = bytemuck::zeroed_box();
-        parse("").unwrap().write_world_map(&mut map);
+        parse("[sim]\n").unwrap().write_world_map(&mut map);
         assert_eq!(map.sensors.beacons_anonymous, 0, "ids shown by default");
         let s = parse("[sensors.beacons]\nrange_max = 2.0\nanonymous = true\n").unwrap();
         s.write_world_map(&mut map);
