@@ -266,6 +266,20 @@ pub fn run_mole(args: &[&str]) -> Output {
         .expect("run mole")
 }
 
+/// `text` without the terminal colour codes tracing writes into the logs.
+pub fn without_colours(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut chars = text.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            chars.by_ref().find(|&c| c == 'm');
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
 /// Every process log of a run, for failure messages.
 pub fn logs(out: &Path) -> String {
     let mut text = String::new();
@@ -298,6 +312,38 @@ pub fn deterministic(summary: &Summary) -> Summary {
         topics: Default::default(),
         ..summary.clone()
     }
+}
+
+/// The fields (JSON paths such as `slam.landmark_rmse_m` or `coverage_steps.0.9`) whose values
+/// differ between two summaries, in order; empty when they are equal.
+pub fn differing_fields(a: &Summary, b: &Summary) -> Vec<String> {
+    fn walk(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+        use serde_json::Value::Object;
+        match (a, b) {
+            (Object(a), Object(b)) => {
+                let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+                for key in keys {
+                    let null = serde_json::Value::Null;
+                    let child = match path {
+                        "" => key.clone(),
+                        _ => format!("{path}.{key}"),
+                    };
+                    walk(
+                        &child,
+                        a.get(key).unwrap_or(&null),
+                        b.get(key).unwrap_or(&null),
+                        out,
+                    );
+                }
+            }
+            _ if a != b => out.push(path.to_string()),
+            _ => {}
+        }
+    }
+    let json = |s: &Summary| serde_json::to_value(s).expect("a summary is JSON");
+    let mut out = Vec::new();
+    walk("", &json(a), &json(b), &mut out);
+    out
 }
 
 /// Reads a run's summary.json into the schema the monitor and the launcher write.

@@ -94,6 +94,19 @@ impl Ekf {
         )
     }
 
+    /// The filter for the world in `map` going on from another estimator's `pose` (a swap, a
+    /// restart): N(pose, its covariance), so a killed EKF's restart steps as the EKF it replaces
+    /// (its running outlier rate starts at 0 again); a covariance that is not positive definite
+    /// becomes the default initial Σ.
+    pub fn resume(map: &WorldMap, pose: &mole_types::Pose) -> Ekf {
+        Ekf::new(
+            Pose2::new(pose.x, pose.y, pose.theta),
+            Matrix3::from_row_slice(&pose.covariance),
+            NoiseModel::from_map(map),
+            map.beacons(),
+        )
+    }
+
     /// g(μ, u): unicycle motion (exact arc; straight-line limit when |ω| small), algorithms §6.6.
     pub fn g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Vector3<f64> {
         unicycle_g(mu, v, omega, dt)

@@ -232,7 +232,8 @@ pub fn build_estimator(
 }
 
 /// Builds estimator `kind` to go on from another estimator's output (a swap or a restart):
-/// from `pose` and, for the SLAM kinds, from `landmarks` too. The localisers start at the
+/// from `pose` and, for the SLAM kinds, from `landmarks` too. The EKF starts at N(pose, its
+/// covariance) (its whole belief: a restarted EKF goes on exactly); the other localisers at the
 /// pose's mean with their usual initial uncertainty (as [`build_estimator`] at the start pose);
 /// the SLAM estimators start at N(pose, its covariance) with every usable landmark of
 /// `landmarks` (mean and 2×2 covariance, uncorrelated with the pose and with each other: the
@@ -274,7 +275,8 @@ pub fn resume(
         EstimatorKind::EkfSlam => Box::new(EkfSlamEstimator::resume(map, pose, landmarks)),
         EstimatorKind::FastSlam => Box::new(FastSlamEstimator::resume(map, pose, landmarks)),
         EstimatorKind::GraphSlam => Box::new(GraphSlamEstimator::resume(map, pose, landmarks)?),
-        EstimatorKind::Bayes | EstimatorKind::Kf | EstimatorKind::Ekf | EstimatorKind::Pf => {
+        EstimatorKind::Ekf => Box::new(Ekf::resume(map, pose)),
+        EstimatorKind::Bayes | EstimatorKind::Kf | EstimatorKind::Pf => {
             build_estimator(kind, &starting_at(map, pose))?
         }
     })

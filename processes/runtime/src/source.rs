@@ -18,6 +18,9 @@ use std::time::{Duration, Instant};
 pub const REPLY_TIMEOUT: Duration = Duration::from_millis(500);
 /// Lockstep: with no reply for this long, publish the step again (a consumer restarted).
 pub const LOCKSTEP_RESEND: Duration = Duration::from_secs(1);
+/// Lockstep: how long a clock resumed after a crash waits for the reply to its last step (the
+/// planner hands it from history within its 100 ms offer) before it steps without one.
+const RESUMED_REPLY_GRACE: Duration = Duration::from_secs(2);
 
 /// What the clock source is asked to do.
 pub enum ClockEvent<'a, M> {
@@ -73,16 +76,37 @@ impl Process {
         let mut latency_ns = 0;
         let mut received = Instant::now();
         let mut applied: Option<u64> = None;
-        // A clock resumed after a crash owes the step after its last truth: it takes it at once
-        // without a reply, unless an operator holds the run (the pace from history).
-        let mut owed = self.resume_after.is_some();
+        // A clock resumed after a crash owes the step after its last truth; every consumer has
+        // handled that truth already. Lockstep waits for the reply to it, which its planner
+        // sent to the dead clock and hands this one from history (it offers its history while
+        // it waits), so the run goes on as if nothing happened; with none within
+        // RESUMED_REPLY_GRACE, and in realtime at once, the step is taken without a reply (the
+        // robot stopped), unless an operator holds the run (the pace from history).
+        let resumed = self.resume_after.is_some();
+        let mut owed = resumed && mode == ClockMode::Realtime;
+        let mut awaiting_reply =
+            (resumed && mode == ClockMode::Lockstep).then(|| Instant::now() + RESUMED_REPLY_GRACE);
         if owed {
             applied = Some(tick);
-        } else if on(ClockEvent::Publish { tick })? == Flow::End {
+        } else if !resumed && on(ClockEvent::Publish { tick })? == Flow::End {
             return Ok(());
         }
         let (mut next_step, mut last_publish) = (Instant::now() + period, Instant::now());
         loop {
+            if let Some(grace) = awaiting_reply
+                && Instant::now() >= grace
+            {
+                awaiting_reply = None;
+                if self.subscriber_mut(reply).tick() != Some(tick) {
+                    tracing::warn!(
+                        tick,
+                        "resumed: no reply to step {tick} within {RESUMED_REPLY_GRACE:?}; \
+                         taking the next step with the robot stopped"
+                    );
+                    owed = true;
+                    applied = Some(tick);
+                }
+            }
             if owed && operator.read(mode).lets_step(mode, tick) {
                 owed = false;
                 operator.took_step();
@@ -107,7 +131,11 @@ impl Process {
             let deadline = match mode {
                 ClockMode::Realtime => Some(next_step),
                 ClockMode::Lockstep if held => None,
-                ClockMode::Lockstep => Some(last_publish + LOCKSTEP_RESEND),
+                ClockMode::Lockstep => Some(
+                    awaiting_reply.map_or(last_publish + LOCKSTEP_RESEND, |grace| {
+                        grace.min(last_publish + LOCKSTEP_RESEND)
+                    }),
+                ),
             };
             let wake = waitset.wait(&mut self.ctx, deadline)?;
             if wake == Wake::Shutdown {
@@ -152,6 +180,7 @@ impl Process {
             operator.took_step();
             let stale = mode == ClockMode::Realtime && received.elapsed() > REPLY_TIMEOUT;
             applied = Some(tick);
+            awaiting_reply = None;
             tick += 1;
             self.ctx.count_step();
             let event = ClockEvent::Advance {

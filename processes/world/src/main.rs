@@ -40,8 +40,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         load_scenario(&args.scenario).map_err(|e| mole_runtime::BadInput(e.to_string()))?;
     scenario.seed = args.common.seed.unwrap_or(scenario.seed);
     let mut p = Process::new("world", &args.common)?;
-    // Restarted after a crash: the run goes on from the last truth (the step after it is taken
-    // with the robot stopped, the command to it having gone to the dead world).
+    // Restarted after a crash: the run goes on from the last truth. In lockstep the step after
+    // it takes the command the planner sent to the dead world (from history), so the run is the
+    // one an unkilled world makes; in realtime it is taken with the robot stopped.
     let truth_was = p.resume_from(topics::WORLD_TRUTH)?;
     let cmd = p.trigger(topics::PLANNING_CMD, Order::Newest)?;
     let mut map_out = p.output(topics::WORLD_MAP)?;
