@@ -689,6 +689,29 @@ class Pace(ctypes.Structure):
 _check(Pace, 40, 8, [0, 32, 36])
 
 
+class Fault(ctypes.Structure):
+    """`mole.Fault.v1`: 112 bytes, alignment 8."""
+
+    _fields_ = [
+        ("header", Header),
+        ("id", ctypes.c_uint32),
+        ("kind", ctypes.c_uint32),
+        ("target", ctypes.c_uint8 * 32),
+        ("start_ns", ctypes.c_uint64),
+        ("end_ns", ctypes.c_uint64),
+        ("delay_ns", ctypes.c_uint64),
+        ("fraction", ctypes.c_double),
+        ("seed", ctypes.c_uint64),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.Fault.v1"
+
+
+_check(Fault, 112, 8, [0, 32, 36, 40, 72, 80, 88, 96, 104])
+
+
 class ControlRequest(ctypes.Structure):
     """`mole.ControlRequest.v1`: 3144 bytes, alignment 8."""
 
@@ -792,6 +815,11 @@ ESTIMATOR_FASTSLAM = 5
 ESTIMATOR_GRAPH_SLAM = 6
 CLOCK_REALTIME = 0
 CLOCK_LOCKSTEP = 1
+FAULT_KILL = 1
+FAULT_STOP = 2
+FAULT_DELAY = 3
+FAULT_DROP = 4
+FAULT_CORRUPT = 5
 
 
 class Topic(NamedTuple):
@@ -889,11 +917,16 @@ OPERATOR_PACE = Topic(
     "operator/pace", Pace, history=1, buffer=16, max_publishers=2, max_subscribers=16
 )
 
+STACK_FAULTS = Topic(
+    "stack/faults", Fault, history=8, buffer=16, max_publishers=2, max_subscribers=64
+)
+
 TOPICS = (
     WORLD_MAP, WORLD_TRUTH, SENSING_SCAN, SENSING_TACTILE, SENSING_ODOM, SENSING_BEACONS,
     SENSING_FIX, LOCALIZATION_POSE, LOCALIZATION_PARTICLES, LOCALIZATION_LANDMARKS,
     LOCALIZATION_TRAJECTORY, MAPPING_GRID, MAPPING_CONTACT, PLANNING_CMD, PLANNING_STATUS,
     STACK_TICK, STACK_STATS, MONITOR_STATUS, STACK_PROCESSES, OPERATOR_GOAL, OPERATOR_PACE,
+    STACK_FAULTS,
 )
 
 

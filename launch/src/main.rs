@@ -5,6 +5,7 @@ use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
 use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
 use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
 use mole_launch::export::{ExportArgs, export};
+use mole_launch::fault::{FaultArgs, fault};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
 use mole_launch::top::{TopArgs, top};
@@ -34,6 +35,9 @@ enum Command {
     Stop(NamespaceArgs),
     /// One line on a running stack: tick, mode, each process's pid and state.
     Status(NamespaceArgs),
+    /// Inject a fault into a running stack: kill or stop a role, delay, drop or corrupt a
+    /// topic's samples, or a seeded chaos session of them.
+    Fault(FaultArgs),
     /// Watch a running stack: each topic's rate, latency, drops; each process's state and CPU.
     Top(TopArgs),
     /// Record every topic of a running stack into an MCAP file, until Ctrl-C or the stack ends.
@@ -71,6 +75,7 @@ fn main() -> ExitCode {
         Command::Swap(args) => swap(&args),
         Command::Stop(args) => stop(&args),
         Command::Status(args) => status(&args),
+        Command::Fault(args) => fault(&args),
         Command::Top(args) => top(&args),
         Command::Record(args) => record(&args),
         Command::Replay(args) => replay(&args),

@@ -6,6 +6,7 @@
 mod prepare;
 
 use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
+use crate::inject::Injector;
 use crate::keeper::Keeper;
 use crate::record::{RecordPlan, Recorder};
 use crate::stats::StatsCollector;
@@ -20,9 +21,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mole_monitor::{Summary, SwapRecord, read_summary, write_summary};
 use mole_runtime::{CommonArgs, Context, ControlServer, Publisher, Subscriber, cleanup_dead_nodes};
 use mole_types::{
-    CONTROL_FAILED, CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP, ClockMode,
-    ControlRequest, EndReason, EstimatorKind, PlannerKind, Processes, Role, RunStatus, Stats,
-    read_name, topics, write_name,
+    CONTROL_FAILED, CONTROL_FAULT, CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP,
+    ClockMode, ControlRequest, EndReason, EstimatorKind, FaultSpec, PlannerKind, Processes, Role,
+    RunStatus, Stats, read_name, topics, write_name,
 };
 use prepare::{Plan, prepare};
 use std::collections::{BTreeMap, BTreeSet};
@@ -321,6 +322,8 @@ struct Stack<'a> {
     recorder: Option<Recorder>,
     /// `--view`: the view beside the stack.
     view: Option<View>,
+    /// `mole fault`: the faults injected, and the processes a fault holds stopped.
+    faults: Injector,
     watch: Watch,
     interrupted: Arc<AtomicBool>,
     progress: ProgressBar,
@@ -342,6 +345,8 @@ fn start(
     let common = common_args(args, &plan);
     let ports = open_ports(&common, interrupted.clone()).map_err(Failure::run)?;
     let keeper = Keeper::start(&common, args.out.join(RESUME_DIR)).map_err(Failure::run)?;
+    let faults = Injector::new(&ports.ctx, plan.mode, plan.seed)
+        .map_err(|e| Failure::run(format!("cannot open stack/faults: {e}")))?;
     let recorder = recording
         .map(|r| r.start(&plan.env, log_of(args, "recorder")))
         .transpose()?;
@@ -356,6 +361,7 @@ fn start(
         supervisor: Supervisor::new(),
         recorder,
         view,
+        faults,
         watch: Watch::new(),
         interrupted,
         progress: progress_bar(plan.ticks, args.quiet),
@@ -435,6 +441,7 @@ fn supervise(stack: &mut Stack<'_>) -> RunEnd {
             return end;
         }
         restart_hung(stack);
+        stack.faults.release_due();
         if let Some(recorder) = stack.recorder.as_mut() {
             recorder.check();
         }
@@ -482,6 +489,29 @@ fn serve_control(stack: &mut Stack<'_>) -> Option<RunEnd> {
             let tick = stack.ports.status.latest().map_or(0, |s| s.header.tick);
             let line = status_line(stack, tick);
             call.respond(|r| write_name(&mut r.text, &line));
+        }
+        CONTROL_FAULT => {
+            let tick = stack.ports.status.latest().map_or(0, |s| s.header.tick);
+            let result = request
+                .argv()
+                .ok_or_else(|| "the fault's words are not valid UTF-8".to_string())
+                .and_then(|words| FaultSpec::from_words(&words).map_err(|e| e.0))
+                .and_then(|spec| stack.faults.inject(&spec, &stack.supervisor, tick));
+            stack.progress.suspend(|| match &result {
+                Ok(line) => tracing::warn!("{line}"),
+                Err(why) => tracing::warn!("fault refused: {why}"),
+            });
+            call.respond(|r| match &result {
+                Ok(line) => {
+                    r.status = CONTROL_OK;
+                    r.tick = tick;
+                    write_name(&mut r.text, line);
+                }
+                Err(why) => {
+                    r.status = CONTROL_REFUSED;
+                    write_name(&mut r.text, why);
+                }
+            });
         }
         _ => {
             let result = swap(stack, &request);
@@ -726,12 +756,15 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         mut supervisor,
         recorder,
         view,
+        faults,
         watch,
         progress,
         started,
         ..
     } = stack;
     progress.finish_and_clear();
+    // Before the stop: a process a fault holds stopped could not take its SIGTERM.
+    let faults = faults.finish();
     let stopping: Vec<String> = stop_order(&plan.launch.processes)
         .into_iter()
         .map(|i| plan.launch.processes[i].role.clone())
@@ -788,6 +821,7 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
     summary.restarts = supervisor.restarts();
     summary.hangs = watch.hangs;
     summary.swaps = watch.swaps;
+    summary.faults = faults;
     if let Some(reason) = exit_reason {
         summary.exit_reason = reason.to_owned();
     }

@@ -14,6 +14,9 @@ pub const CONTROL_SWAP: u32 = 1;
 pub const CONTROL_STOP: u32 = 2;
 /// `ControlRequest::op`: describe the stack in one line.
 pub const CONTROL_STATUS: u32 = 3;
+/// `ControlRequest::op`: inject the fault `argv` describes (`mole fault`,
+/// `mole_types::FaultSpec::to_words`).
+pub const CONTROL_FAULT: u32 = 4;
 
 /// Bytes for the NUL-separated words of a command.
 pub const CONTROL_ARGV_LEN: usize = 2048;
@@ -28,7 +31,7 @@ pub const CONTROL_TEXT_LEN: usize = 1024;
 #[type_name("mole.ControlRequest.v1")]
 pub struct ControlRequest {
     pub header: Header,
-    /// `CONTROL_SWAP`, `CONTROL_STOP` or `CONTROL_STATUS`.
+    /// `CONTROL_SWAP`, `CONTROL_STOP`, `CONTROL_STATUS` or `CONTROL_FAULT`.
     pub op: u32,
     /// How many NUL-terminated words `argv` holds.
     pub n_args: u32,
@@ -85,11 +88,16 @@ impl Message for ControlRequest {
         &mut self.header
     }
     fn validate(&self) -> Result<(), Invalid> {
-        if !matches!(self.op, CONTROL_SWAP | CONTROL_STOP | CONTROL_STATUS) {
+        if !matches!(
+            self.op,
+            CONTROL_SWAP | CONTROL_STOP | CONTROL_STATUS | CONTROL_FAULT
+        ) {
             return Err(Invalid::UnknownCode("op"));
         }
         within("n_args", self.n_args, CONTROL_ARGV_LEN / 2)?;
-        if self.op == CONTROL_SWAP && (self.n_args == 0 || self.argv().is_none()) {
+        if matches!(self.op, CONTROL_SWAP | CONTROL_FAULT)
+            && (self.n_args == 0 || self.argv().is_none())
+        {
             return Err(Invalid::OutOfRange("argv"));
         }
         Ok(())

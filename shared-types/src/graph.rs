@@ -295,6 +295,7 @@ mod tests {
             let outside = [
                 STACK_STATS.name,
                 STACK_PROCESSES.name,
+                STACK_FAULTS.name,
                 OPERATOR_GOAL.name,
                 OPERATOR_PACE.name,
             ];

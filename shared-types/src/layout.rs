@@ -5,6 +5,7 @@
 //! compile time below; `bytemuck::Pod` already refuses any implicit padding.
 
 use crate::control::*;
+use crate::fault::Fault;
 use crate::geometry::*;
 use crate::messages::*;
 use core::mem::{align_of, offset_of, size_of};
@@ -105,6 +106,8 @@ pub fn all() -> Vec<TypeLayout> {
         layout!(Processes, type_name::<Processes>(); header, n_processes, _pad, processes),
         layout!(Goal, type_name::<Goal>(); header, x, y, tolerance),
         layout!(Pace, type_name::<Pace>(); header, op, steps),
+        layout!(Fault, type_name::<Fault>();
+            header, id, kind, target, start_ns, end_ns, delay_ns, fraction, seed),
         layout!(RobotSpec, type_name::<RobotSpec>(); radius, max_speed, max_omega, max_accel, max_alpha),
         layout!(SensorSpec, type_name::<SensorSpec>();
             lidar_beams, tactile_sensors, lidar_range_max, lidar_fov, lidar_range_std,
@@ -238,6 +241,9 @@ fn constants() -> Vec<(String, u64)> {
     }));
     all.extend(choice_codes("CLOCK", ClockMode::NAMES, |i| {
         ClockMode::ALL[i].code()
+    }));
+    all.extend(choice_codes("FAULT", crate::FaultKind::NAMES, |i| {
+        crate::FaultKind::ALL[i].code()
     }));
     all
 }

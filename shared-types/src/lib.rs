@@ -12,6 +12,7 @@ pub mod geometry;
 pub mod golden;
 #[macro_use]
 pub mod kinds;
+pub mod fault;
 pub mod graph;
 pub mod layout;
 pub mod link;
@@ -19,6 +20,7 @@ pub mod messages;
 pub mod topics;
 
 pub use control::*;
+pub use fault::{Fault, FaultKind, FaultSpec};
 pub use geometry::*;
 pub use graph::{GRAPH, Role, RoleSpec};
 pub use kinds::{ClockMode, EndReason, EstimatorKind, PlannerKind, UnknownChoice};

@@ -17,6 +17,9 @@ pub struct Topic<M> {
     pub max_publishers: usize,
     /// Subscribers the service admits.
     pub max_subscribers: usize,
+    /// Whether a full queue drops its oldest sample in lockstep too (a notice every process
+    /// reads only now and then, which must never hold its publisher back).
+    pub never_waits: bool,
     _message: PhantomData<fn() -> M>,
 }
 
@@ -45,6 +48,7 @@ impl<M> Topic<M> {
             buffer: 16,
             max_publishers: 2,
             max_subscribers: 16,
+            never_waits: false,
             _message: PhantomData,
         }
     }
@@ -62,6 +66,10 @@ impl<M> Topic<M> {
     }
     pub const fn max_subscribers(mut self, n: usize) -> Self {
         self.max_subscribers = n;
+        self
+    }
+    pub const fn never_waits(mut self) -> Self {
+        self.never_waits = true;
         self
     }
 }
@@ -125,6 +133,10 @@ topics! {
     /// An operator's pause, step or run of a lockstep world; history 1: a restarted world
     /// picks up the current pace.
     OPERATOR_PACE: Pace = Topic::new("operator/pace").history(1);
+    /// The faults `mole fault` injected, from the launcher to every process (each one's runtime
+    /// applies those aimed at the topics it publishes) and observer; the last 8 from history.
+    STACK_FAULTS: crate::fault::Fault =
+        Topic::new("stack/faults").history(8).buffer(16).max_subscribers(64).never_waits();
 }
 
 /// A request-response service: its name and the types of its requests and responses.

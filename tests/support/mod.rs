@@ -83,7 +83,10 @@ pub fn shm_files() -> Vec<String> {
         if let Ok(entries) = std::fs::read_dir(dir) {
             for entry in entries.flatten() {
                 let name = entry.file_name().to_string_lossy().into_owned();
-                if dir != "/dev/shm" || name.starts_with("iox2_") {
+                // iceoryx2 keeps one management segment per machine and version for every
+                // node on it (`…global_mgmt`); it is not a stack's and outlives every run.
+                let stack_file = name.starts_with("iox2_") && !name.ends_with(".global_mgmt");
+                if dir != "/dev/shm" || stack_file {
                     names.push(format!("{dir}/{name}"));
                 }
             }

@@ -17,8 +17,8 @@ mod truth;
 pub use ending::{Ending, LOCKSTEP_DRAIN, RunEnding};
 pub use slam::{CHI2_2_95, SlamSummary};
 pub use summary::{
-    LatencyUs, RunMeta, Summary, SwapRecord, TopicSummary, UpdateUs, fnv1a64, read_summary,
-    write_summary,
+    FaultRecord, LatencyUs, RunMeta, Summary, SwapRecord, TopicSummary, UpdateUs, fnv1a64,
+    read_summary, write_summary,
 };
 
 use hdrhistogram::Histogram;
@@ -751,6 +751,7 @@ impl Monitor {
             // The launcher's part: it fills these after the run.
             hangs: BTreeMap::new(),
             swaps: Vec::new(),
+            faults: Vec::new(),
             launcher_wall_time_s: None,
         }
     }

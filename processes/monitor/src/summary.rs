@@ -120,6 +120,9 @@ pub struct Summary {
     /// The launcher's part: every `mole swap` done during the run, in order.
     #[serde(default)]
     pub swaps: Vec<SwapRecord>,
+    /// The launcher's part: every fault `mole fault` injected during the run, in order.
+    #[serde(default)]
+    pub faults: Vec<FaultRecord>,
     /// The launcher's part: from its start to the end of the stack (`null` until it wrote it).
     #[serde(default)]
     pub launcher_wall_time_s: Option<f64>,
@@ -149,6 +152,25 @@ pub struct SwapRecord {
     pub killed_old: bool,
     /// From the request to the end of the watch.
     pub duration_s: f64,
+}
+
+/// One fault `mole fault` injected (see `mole_types::fault`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct FaultRecord {
+    /// 1 for the run's first fault, then counting up.
+    pub id: u32,
+    /// `kill`, `stop`, `delay`, `drop` or `corrupt`.
+    pub kind: String,
+    /// The role or topic it was aimed at.
+    pub target: String,
+    /// The world's newest step when it was injected.
+    pub tick: u64,
+    /// How long it lasted (s; 0 for a kill).
+    pub duration_s: f64,
+    /// How long each sample was held (delay).
+    pub delay_ms: f64,
+    /// The fraction of samples dropped or corrupted.
+    pub fraction: f64,
 }
 
 /// Reads a summary.json back (the launcher's and the tests' way in).

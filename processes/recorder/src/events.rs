@@ -1,6 +1,6 @@
 //! What happened to the stack's processes, as the recorder writes it on [`EVENTS_TOPIC`]: a role
-//! started, restarted after a crash, swapped for another process, exited or failed, and samples
-//! the recorder lost.
+//! started, restarted after a crash, swapped for another process, exited or failed, a fault was
+//! injected (`mole fault`, from `stack/faults`), and samples the recorder lost.
 //!
 //! The process events come from `stack/processes`, which the launcher publishes once a second
 //! with every role's pid, state and restart count (for `mole top`): a new pid with one restart
@@ -8,7 +8,9 @@
 //! but what any observer of the stack sees, `mole record` attached to a running stack finds the
 //! same events as `mole up --record`, and an event is placed within a second of when it happened.
 
-use mole_types::{PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, Processes, read_name};
+use mole_types::{
+    Fault, FaultKind, PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, Processes, read_name,
+};
 use serde_json::json;
 use std::collections::BTreeMap;
 
@@ -18,10 +20,10 @@ pub const EVENTS_TOPIC: &str = "stack/events";
 /// The events' schema name.
 pub const EVENT_SCHEMA_NAME: &str = "mole.Event";
 /// The events' JSON schema.
-pub const EVENT_SCHEMA: &str = r#"{"type":"object","properties":{"tick":{"type":"integer","description":"the newest world tick when the recorder saw it"},"kind":{"type":"string","enum":["started","restarted","swapped","down","exited","failed","lost"]},"role":{"type":"string"},"pid":{"type":"integer"},"old_pid":{"type":"integer"},"restarts":{"type":"integer"},"topic":{"type":"string"},"count":{"type":"integer","description":"samples lost before the recorder read them"}},"required":["tick","kind"]}"#;
+pub const EVENT_SCHEMA: &str = r#"{"type":"object","properties":{"tick":{"type":"integer","description":"the newest world tick when the recorder saw it"},"kind":{"type":"string","enum":["started","restarted","swapped","down","exited","failed","lost","fault"]},"role":{"type":"string"},"fault":{"type":"string","enum":["kill","stop","delay","drop","corrupt"],"description":"what `mole fault` did"},"id":{"type":"integer","description":"the fault's number in the run"},"target":{"type":"string","description":"the role or topic faulted"},"duration_s":{"type":"number"},"delay_ms":{"type":"number"},"fraction":{"type":"number"},"pid":{"type":"integer"},"old_pid":{"type":"integer"},"restarts":{"type":"integer"},"topic":{"type":"string"},"count":{"type":"integer","description":"samples lost before the recorder read them"}},"required":["tick","kind"]}"#;
 
 /// One event.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Event {
     /// A role's first process.
     Started { role: String, pid: u32 },
@@ -46,6 +48,17 @@ pub enum Event {
     Failed { role: String },
     /// Samples of a topic that overflowed the recorder's queue before it read them.
     Lost { topic: String, count: u64 },
+    /// A fault `mole fault` injected (`stack/faults`): its number, kind, target, how long
+    /// (s), how long each sample was held (ms, a delay) and the fraction hit (a drop or a
+    /// corruption).
+    Fault {
+        id: u32,
+        fault: &'static str,
+        target: String,
+        duration_s: f64,
+        delay_ms: f64,
+        fraction: f64,
+    },
 }
 
 impl Event {
@@ -75,8 +88,32 @@ impl Event {
             Event::Lost { topic, count } => {
                 json!({"tick": tick, "kind": "lost", "topic": topic, "count": count})
             }
+            Event::Fault {
+                id,
+                fault,
+                target,
+                duration_s,
+                delay_ms,
+                fraction,
+            } => json!({"tick": tick, "kind": "fault", "fault": fault, "id": id,
+                        "target": target, "duration_s": duration_s, "delay_ms": delay_ms,
+                        "fraction": fraction}),
         };
         value.to_string()
+    }
+}
+
+impl Event {
+    /// The event of a fault read on `stack/faults`.
+    pub fn of_fault(fault: &Fault) -> Event {
+        Event::Fault {
+            id: fault.id,
+            fault: fault.fault_kind().map_or("unknown", FaultKind::name),
+            target: fault.target().into_owned(),
+            duration_s: fault.end_ns.saturating_sub(fault.start_ns) as f64 / 1e9,
+            delay_ms: fault.delay_ns as f64 / 1e6,
+            fraction: fault.fraction,
+        }
     }
 }
 

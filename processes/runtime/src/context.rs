@@ -4,6 +4,7 @@ use crate::admin::create_node;
 use crate::clock::ClockMode;
 use crate::doorbell::{Doorbell, LISTENER_NAME};
 use crate::error::RuntimeError;
+use crate::faults::FaultBoard;
 use crate::ports::{Publisher, Subscriber};
 use crate::stats::StatsRegistry;
 use crate::time::init_tracing;
@@ -72,6 +73,8 @@ pub struct Context {
     resume: Option<std::path::PathBuf>,
     /// This process's publishers (those still alive), for [`Context::offer_history`].
     history_offers: std::cell::RefCell<Vec<std::rc::Weak<dyn crate::ports::OfferHistory>>>,
+    /// `stack/faults` as this process's publishers see it, opened with the first of them.
+    faults: std::cell::OnceCell<Rc<FaultBoard>>,
 }
 
 /// Lockstep: how long a publisher waits for a subscriber whose queue is full before it drops
@@ -117,6 +120,7 @@ impl Context {
             takeover: args.takeover,
             resume: args.resume.clone(),
             history_offers: Default::default(),
+            faults: Default::default(),
         };
         ctx.stats_publisher = Some(ctx.publisher(topics::STACK_STATS)?);
         Ok(ctx)
@@ -215,7 +219,7 @@ impl Context {
         };
         // Lockstep never drops: a full subscriber queue makes the publisher wait. Realtime
         // drops the oldest sample, so a slow subscriber never stalls the pipeline.
-        let safe_overflow = offer || self.mode != ClockMode::Lockstep;
+        let safe_overflow = offer || topic.never_waits || self.mode != ClockMode::Lockstep;
         let pubsub = self
             .node
             .service_builder(&name)
@@ -317,7 +321,29 @@ impl Context {
             .stats
             .register(topic.name, true)
             .map_err(|e| port_failed(format!("{e:?}")))?;
-        Ok(Publisher::new(topic.name, publisher, notifier, stats))
+        let faults = (self.fault_board()?, self.mode == ClockMode::Lockstep);
+        Ok(Publisher::new(
+            topic.name,
+            publisher,
+            notifier,
+            stats,
+            Some(faults),
+        ))
+    }
+
+    /// The process's view of `stack/faults`, which every publisher consults before it sends; its
+    /// subscriber's statistics are its own (they would crowd out the process's topics).
+    fn fault_board(&self) -> Result<Rc<FaultBoard>, RuntimeError> {
+        if let Some(board) = self.faults.get() {
+            return Ok(board.clone());
+        }
+        let topic = topics::STACK_FAULTS;
+        let pubsub = self.open_pubsub(&self.namespace, &topic, false)?;
+        let subscriber = self.subscriber_on(&topic, pubsub, None, &StatsRegistry::default())?;
+        Ok(self
+            .faults
+            .get_or_init(|| Rc::new(FaultBoard::new(subscriber)))
+            .clone())
     }
 
     /// A subscriber on `pubsub`; it wakes the process through a listener on `event` if given.
@@ -326,6 +352,7 @@ impl Context {
         topic: &Topic<M>,
         pubsub: PubSubFactory<M>,
         event: Option<EventFactory>,
+        stats: &StatsRegistry,
     ) -> Result<Subscriber<M>, RuntimeError> {
         let port_failed =
             |e: String| RuntimeError::Port(format!("subscriber on {}: {e}", topic.name));
@@ -344,8 +371,7 @@ impl Context {
             )),
             None => None,
         };
-        let stats = self
-            .stats
+        let stats = stats
             .register(topic.name, false)
             .map_err(|e| port_failed(format!("{e:?}")))?;
         Ok(Subscriber {
@@ -364,8 +390,8 @@ impl Context {
     pub fn publisher<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
         let pubsub = self.open_pubsub(&self.namespace, &topic, false)?;
         let event = self.open_event(&self.namespace, &topic)?;
-        let lockstep = self.mode == ClockMode::Lockstep;
-        let publisher = self.publisher_on(&topic, pubsub, event, lockstep)?;
+        let waits = self.mode == ClockMode::Lockstep && !topic.never_waits;
+        let publisher = self.publisher_on(&topic, pubsub, event, waits)?;
         self.history_offers
             .borrow_mut()
             .push(publisher.history_offer());
@@ -395,7 +421,7 @@ impl Context {
     ) -> Result<Subscriber<M>, RuntimeError> {
         let pubsub = self.open_pubsub(&self.namespace, &topic, false)?;
         let event = self.open_event(&self.namespace, &topic)?;
-        self.subscriber_on(&topic, pubsub, wakes.then_some(event))
+        self.subscriber_on(&topic, pubsub, wakes.then_some(event), &self.stats)
     }
 
     /// A waker for the close of the loop's step: the listener of the topic that closes it, the
@@ -640,7 +666,7 @@ impl Context {
             )));
         }
         let pubsub = self.open_pubsub(peer, &topic, true)?;
-        self.subscriber_on(&topic, pubsub, None)
+        self.subscriber_on(&topic, pubsub, None, &self.stats)
     }
 }
 

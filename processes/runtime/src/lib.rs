@@ -24,6 +24,7 @@ mod context;
 mod control;
 mod doorbell;
 mod error;
+mod faults;
 mod keep;
 mod observe;
 mod ports;

@@ -4,6 +4,7 @@
 
 use crate::doorbell::Rings;
 use crate::error::RuntimeError;
+use crate::faults::{Action, FaultBoard};
 use crate::stats::PortHandle;
 use crate::time::now_ns;
 use iceoryx2::port::listener::Listener;
@@ -25,6 +26,11 @@ pub struct Publisher<M: Message> {
     ports: Rc<PublisherPorts<M>>,
     pub(crate) stats: PortHandle,
     pub(crate) seq: u64,
+    /// The process's faults on demand (`mole fault`), looked up before every send.
+    faults: Option<Rc<FaultBoard>>,
+    /// Lockstep: a corrupted sample is followed by the good one (lockstep delivers every
+    /// sample); realtime: the corrupted one is all the readers get.
+    lockstep: bool,
 }
 
 /// A publisher's iceoryx2 ports.
@@ -65,7 +71,9 @@ impl<M: Message> Publisher<M> {
         publisher: iceoryx2::port::publisher::Publisher<ipc::Service, M, ()>,
         notifier: Notifier<ipc::Service>,
         stats: PortHandle,
+        faults: Option<(Rc<FaultBoard>, bool)>,
     ) -> Self {
+        let lockstep = faults.as_ref().is_some_and(|(_, lockstep)| *lockstep);
         Self {
             topic,
             ports: Rc::new(PublisherPorts {
@@ -76,6 +84,8 @@ impl<M: Message> Publisher<M> {
             }),
             stats,
             seq: 0,
+            faults: faults.map(|(board, _)| board),
+            lockstep,
         }
     }
 
@@ -112,11 +122,35 @@ impl<M: Message> Publisher<M> {
         let mut sample = unsafe { sample.assume_init() };
         let message = sample.payload_mut();
         fill(message);
+        let stamp_ns = now_ns();
         let header = message.header_mut();
         header.seq = self.seq;
         header.tick = tick;
-        header.stamp_ns = now_ns();
+        header.stamp_ns = stamp_ns;
         header.origin_ns = origin_ns;
+        let action = self
+            .faults
+            .as_ref()
+            .map_or(Action::Send, |board| board.action(self.topic, stamp_ns));
+        match action {
+            Action::Send => {}
+            Action::Delay(ns) => {
+                std::thread::sleep(Duration::from_nanos(ns));
+                sample.payload_mut().header_mut().stamp_ns = now_ns();
+            }
+            Action::Drop => {
+                // Never sent: the readers see the sequence gap and count the loss.
+                self.seq += 1;
+                self.stats.dropped(1);
+                return Ok(());
+            }
+            Action::Corrupt(seed) if self.lockstep => {
+                self.send_corrupted_copy(sample.payload(), seed)?
+            }
+            Action::Corrupt(seed) => {
+                crate::faults::corrupt(sample.payload_mut(), seed);
+            }
+        }
         if let Err(e) = sample.send() {
             self.stats.dropped(1);
             return Err(RuntimeError::Port(format!("send on {}: {e:?}", self.topic)));
@@ -124,6 +158,24 @@ impl<M: Message> Publisher<M> {
         self.seq += 1;
         self.stats.counted(None);
         self.ports.wake_listeners();
+        Ok(())
+    }
+
+    /// Lockstep's corruption: a corrupted copy of `message`, with its sequence number, goes
+    /// ahead of it, so every reader's validation must refuse one sample and the run still gets
+    /// the good one (lockstep delivers every sample; a lost one would stall it).
+    fn send_corrupted_copy(&mut self, message: &M, seed: u64) -> Result<(), RuntimeError> {
+        let copy = self
+            .ports
+            .publisher
+            .loan_uninit()
+            .map_err(|e| RuntimeError::Port(format!("loan on {}: {e:?}", self.topic)))?;
+        // SAFETY: as in `publish`: the slot only ever holds whole messages of this `Pod` type.
+        let mut copy = unsafe { copy.assume_init() };
+        bytemuck::bytes_of_mut(copy.payload_mut()).copy_from_slice(bytemuck::bytes_of(message));
+        crate::faults::corrupt(copy.payload_mut(), seed);
+        copy.send()
+            .map_err(|e| RuntimeError::Port(format!("send on {}: {e:?}", self.topic)))?;
         Ok(())
     }
 
