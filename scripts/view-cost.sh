@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # What watching costs the stack: realtime loop latency (p50/p99) and lockstep steps/s without the
 # view, with `--view` and no page open, and with a headless Chromium showing the page, in
-# alternating rounds, as a Markdown table (docs/view.md "What it costs" explains the numbers).
+# alternating rounds, as a Markdown table (docs/view.md "What it costs" explains the numbers);
+# and the view's own frame rate in each run with a view: the frames it made over the time it
+# served, from the line its log ends with (`view finished frames=N elapsed_s=S`).
 #
 # Usage: scripts/view-cost.sh [PAIRS] [REALTIME_S] [LOCKSTEP_TICKS] [OUT]
 #   PAIRS           rounds of the three runs, per clock mode (default 2)
@@ -81,18 +83,33 @@ for n in $(seq 1 "$pairs"); do
 done
 
 python3 - "$out" "$pairs" <<'EOF'
-import json, sys
+import json, re, sys
 out, pairs = sys.argv[1], int(sys.argv[2])
 def load(name):
     with open(f"{out}/{name}.json") as f:
         return json.load(f)
-print("| run | realtime loop p50 (µs) | p99 (µs) | lockstep steps/s |")
-print("| --- | ---: | ---: | ---: |")
+def frame_rate(name):
+    """The view's frames a second in run `name` ("" without a view)."""
+    try:
+        with open(f"{out}/{name}/logs/view.log", encoding="utf-8", errors="replace") as f:
+            log = f.read()
+    except OSError:
+        return ""
+    log = re.sub(r"\x1b\[[0-9;]*m", "", log)  # the log's colours
+    found = re.findall(r"view finished.*?frames=(\d+).*?elapsed_s=([0-9.]+)", log)
+    if not found:
+        return "?"
+    frames, seconds = found[-1]
+    return f"{int(frames) / float(seconds):.1f}"
+print("| run | realtime loop p50 (µs) | p99 (µs) | lockstep steps/s | view frames/s (realtime, lockstep) |")
+print("| --- | ---: | ---: | ---: | ---: |")
 for n in range(1, pairs + 1):
     for view in ("none", "view", "browser"):
         rt, ls = load(f"realtime-{view}-{n}"), load(f"lockstep-{view}-{n}")
         lat = rt["loop_latency_us"]
         label = {"none": "without the view", "view": "`--view`, no page open",
                  "browser": "`--view` + headless Chromium"}[view]
-        print(f"| {n}: {label} | {lat['p50']:.0f} | {lat['p99']:.0f} | {ls['steps_per_s']:.0f} |")
+        rates = ", ".join(r for r in (frame_rate(f"realtime-{view}-{n}"),
+                                      frame_rate(f"lockstep-{view}-{n}")) if r)
+        print(f"| {n}: {label} | {lat['p50']:.0f} | {lat['p99']:.0f} | {ls['steps_per_s']:.0f} | {rates} |")
 EOF

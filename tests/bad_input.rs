@@ -260,3 +260,23 @@ fn a_namespace_in_use_is_refused() {
     );
     let _ = std::fs::remove_dir_all(out);
 }
+
+/// `mole up --view=P` with P in use is refused before any process starts, naming the flag, the
+/// address and what was expected.
+#[test]
+fn a_view_port_in_use_is_refused() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("a port");
+    let port = taken.local_addr().expect("its address").port();
+    let flag = format!("--view={port}");
+    let output = refused_up("view-port", &["--mode", "lockstep", "--ticks", "50", &flag]);
+    let err = stderr_of(&output);
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{flag}: cannot serve the view on 127.0.0.1:{port}"
+        )),
+        "{err}"
+    );
+    assert!(err.contains("expected a free port"), "{err}");
+    drop(taken);
+}

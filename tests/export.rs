@@ -1,11 +1,15 @@
 //! `mole export FILE OUT --foxglove`, as a user runs it: a recorded lockstep run exported with
 //! Foxglove's well-known schemas reads back, with the `mcap` package from PyPI, as the run the
-//! stack published; what is not a recording is refused.
+//! stack published; every exported message of a particle filter's and of an EKF-SLAM run is
+//! valid against Foxglove's published schemas (`@foxglove/schemas`, with ajv), which the file
+//! holds; what is not a recording is refused.
 
 use mole_integration_tests::*;
-use mole_types::{Grid, Truth, topics};
+use mole_types::{EstimatorKind, Grid, Truth, topics};
+use std::collections::BTreeMap;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const RUN_TIMEOUT: Duration = Duration::from_secs(240);
@@ -20,15 +24,20 @@ impl Drop for Kept {
     }
 }
 
-/// A recorded lockstep run of `ticks` steps that must succeed: the directory it left, with the
-/// recording `run.mcap` in it.
-fn recorded_lockstep_run(test: &str, ticks: u64) -> Kept {
+/// A recorded lockstep run of `ticks` steps (and `more` arguments of `mole up`) that must
+/// succeed: the directory it left, with the recording `run.mcap` in it.
+fn recorded_lockstep_run(test: &str, ticks: u64, more: &[&str]) -> Kept {
     let namespace = unique_namespace(test);
     let out = std::env::temp_dir().join(format!("mole-{namespace}"));
     let file = out.join("run.mcap").display().to_string();
     let ticks = ticks.to_string();
     let args = ["--mode", "lockstep", "--ticks", &ticks, "--seed", "5"];
-    let args: Vec<&str> = args.iter().copied().chain(["--record", &file]).collect();
+    let args: Vec<&str> = args
+        .iter()
+        .copied()
+        .chain(more.iter().copied())
+        .chain(["--record", &file])
+        .collect();
     let stack = Stack::start_in(&namespace, &args);
     let kept = Kept(out.with_extension("kept"));
     let output = stack.wait_and_copy(&kept.0, RUN_TIMEOUT);
@@ -51,6 +60,24 @@ fn recorded(path: &Path, topic: &str) -> Vec<(u64, Vec<u8>)> {
         .filter(|m| m.channel.topic == topic)
         .map(|m| (m.log_time, m.data.into_owned()))
         .collect()
+}
+
+/// Exports the recording `run.mcap` of `run` into `foxglove.mcap` beside it with `mole export
+/// --foxglove`, which must succeed: (recording, export).
+fn exported(run: &Kept) -> (PathBuf, PathBuf) {
+    let (recording, export) = (run.0.join("run.mcap"), run.0.join("foxglove.mcap"));
+    let output = run_mole(&[
+        "export",
+        &recording.display().to_string(),
+        &export.display().to_string(),
+        "--foxglove",
+    ]);
+    assert!(
+        output.status.success(),
+        "mole export failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    (recording, export)
 }
 
 /// Reads the export `argv[1]` knowing only Foxglove's schemas: every channel's schema name and
@@ -89,19 +116,8 @@ fn an_exported_recording_reads_back_as_the_recorded_run() {
         Err(reason) => return skip(test, &reason),
     };
     let _serial = serial();
-    let run = recorded_lockstep_run("export", 200);
-    let (recording, export) = (run.0.join("run.mcap"), run.0.join("foxglove.mcap"));
-    let output = run_mole(&[
-        "export",
-        &recording.display().to_string(),
-        &export.display().to_string(),
-        "--foxglove",
-    ]);
-    assert!(
-        output.status.success(),
-        "mole export failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let run = recorded_lockstep_run("export", 200, &[]);
+    let (recording, export) = exported(&run);
 
     let (at, truth) = recorded(&recording, topics::WORLD_TRUTH.name)
         .into_iter()
@@ -167,6 +183,124 @@ fn an_exported_recording_reads_back_as_the_recorded_run() {
         columns * rows,
         u64::from(grid.width) * u64::from(grid.height)
     );
+}
+
+/// Each channel an export writes and its schema (docs/recording.md's table).
+const EXPORTED_CHANNELS: [(&str, &str); 11] = [
+    ("/truth", "foxglove.PoseInFrame"),
+    ("/tf", "foxglove.FrameTransform"),
+    ("/pose", "foxglove.PoseInFrame"),
+    ("/pose/ellipse", "foxglove.SceneUpdate"),
+    ("/scan", "foxglove.LaserScan"),
+    ("/grid", "foxglove.Grid"),
+    ("/contact", "foxglove.Grid"),
+    ("/map", "foxglove.SceneUpdate"),
+    ("/path", "foxglove.SceneUpdate"),
+    ("/particles", "foxglove.SceneUpdate"),
+    ("/landmarks", "foxglove.SceneUpdate"),
+];
+
+/// The validator's input for the export at `path`: each channel (its schema name, encodings and
+/// schema text) before its first message, then every message with its index on its channel;
+/// and each channel's schema name and count of messages.
+fn validator_input(path: &Path) -> (Vec<u8>, BTreeMap<String, (String, u64)>) {
+    let bytes = std::fs::read(path).expect("read the export");
+    let (mut input, mut counts) = (Vec::new(), BTreeMap::<String, (String, u64)>::new());
+    for message in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let message = message.expect("a complete export");
+        let channel = &message.channel;
+        let schema = channel.schema.as_ref().expect("every channel has a schema");
+        let index = counts.get(&channel.topic).map(|(_, n)| *n);
+        if index.is_none() {
+            let line = serde_json::json!({
+                "channel": channel.topic, "schema_name": schema.name,
+                "schema_encoding": schema.encoding, "message_encoding": channel.message_encoding,
+                "schema": String::from_utf8_lossy(&schema.data),
+            });
+            writeln!(input, "{line}").expect("a line");
+        }
+        let line = serde_json::json!({
+            "channel": channel.topic, "index": index.unwrap_or(0),
+            "data": String::from_utf8_lossy(&message.data),
+        });
+        writeln!(input, "{line}").expect("a line");
+        counts
+            .entry(channel.topic.clone())
+            .or_insert_with(|| (schema.name.clone(), 0))
+            .1 += 1;
+    }
+    (input, counts)
+}
+
+/// Every message of an export — of a particle filter's run and of an EKF-SLAM run, frontier
+/// exploration both, so that every channel is written — is valid against the published schema
+/// of its channel's schema name (`@foxglove/schemas` with ajv), and every schema the file holds
+/// is the published one. Failures name the channel, the message's index on it and ajv's error.
+#[test]
+fn every_exported_message_is_valid_against_foxgloves_published_schemas() {
+    let test = "every_exported_message_is_valid_against_foxgloves_published_schemas";
+    if let Err(reason) = foxglove_validator() {
+        return skip(test, &reason);
+    }
+    let _serial = serial();
+    let mut seen = BTreeMap::new();
+    for (estimator, ticks) in [(EstimatorKind::Pf, 300), (EstimatorKind::EkfSlam, 150)] {
+        let args = ["--estimator", estimator.name(), "--planner", "frontier"];
+        let run = recorded_lockstep_run(&format!("export-valid-{estimator}"), ticks, &args);
+        let (_, export) = exported(&run);
+        let (input, counts) = validator_input(&export);
+        let mut node = foxglove_validator()
+            .expect("the validator ran a moment ago")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start node");
+        let mut stdin = node.stdin.take().expect("stdin");
+        let feeder = std::thread::spawn(move || stdin.write_all(&input));
+        let output = node.wait_with_output().expect("node ran");
+        feeder
+            .join()
+            .expect("the feeder")
+            .expect("node read its input");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "{estimator}: the validator failed: {stdout}\n{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let report: serde_json::Value = serde_json::from_str(stdout.trim())
+            .unwrap_or_else(|e| panic!("the validator printed no JSON ({e}): {stdout}"));
+        let failed: u64 = report["failed"]
+            .as_object()
+            .expect("failed")
+            .values()
+            .filter_map(serde_json::Value::as_u64)
+            .sum();
+        assert_eq!(
+            (failed, &report["failures"]),
+            (0, &serde_json::json!([])),
+            "{estimator}: messages that are not valid (channel, index, ajv's errors), of {counts:?}: {:#}",
+            report["failures"]
+        );
+        for (channel, (schema, count)) in counts {
+            assert_eq!(
+                report["schemas"][&channel], "published",
+                "{estimator}: {channel}: {}",
+                report["schemas"]
+            );
+            assert_eq!(
+                report["validated"][&channel], count,
+                "{estimator}: {channel}"
+            );
+            seen.insert(channel, schema);
+        }
+    }
+    let expected: BTreeMap<String, String> = EXPORTED_CHANNELS
+        .iter()
+        .map(|(c, s)| (c.to_string(), s.to_string()))
+        .collect();
+    assert_eq!(seen, expected, "the channels of the two exports");
 }
 
 /// `mole export` refuses a file that is not a recording: exit 2, a message naming the file and

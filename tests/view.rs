@@ -1,5 +1,7 @@
 //! The live view, as a user meets it: `mole up --view` serves frames over a WebSocket that agree
-//! with what the stack publishes, at least 5 a second, and survives garbage input, counting it;
+//! with what the stack publishes, every frame it makes to a page that keeps up, refuses other
+//! sites' pages, and survives garbage input, counting it; watch-only, it refuses every input; a
+//! port in use is refused, serving beyond loopback is warned of;
 //! the page, loaded in headless Chromium, draws the robot moving and the map filling without a
 //! console error; and `mole view FILE` shows a recording with no stack and no IPC: its timeline
 //! spans the file, a seek shows the recorded truth of its tick, play reaches the end, pause
@@ -16,8 +18,10 @@ use std::time::{Duration, Instant};
 use tungstenite::stream::MaybeTlsStream;
 use tungstenite::{Message, WebSocket};
 
-/// How long a test watches the view.
+/// How long the browser test watches the page.
 const WATCH: Duration = Duration::from_secs(3);
+/// Frames a WebSocket test reads in a row (three seconds of them).
+const FRAMES_WATCHED: usize = 60;
 /// Guards a read that would otherwise hang forever.
 const READ_TIMEOUT: Duration = Duration::from_secs(10);
 /// Long enough a realtime run that the stack outlives every test (they stop it).
@@ -124,12 +128,38 @@ impl Witness {
     }
 }
 
+/// A WebSocket handshake to `ws_url` that says it comes from a page of `origin`: the HTTP
+/// status it was answered with (101 when the view took it).
+fn handshake_from(ws_url: &str, origin: &str) -> u16 {
+    use tungstenite::client::IntoClientRequest as _;
+    let mut request = ws_url.into_client_request().expect("a request");
+    request
+        .headers_mut()
+        .insert("Origin", origin.parse().expect("an Origin header"));
+    match tungstenite::connect(request) {
+        Ok((_, response)) => response.status().as_u16(),
+        Err(tungstenite::Error::Http(response)) => response.status().as_u16(),
+        Err(e) => panic!("the handshake from {origin} broke: {e}"),
+    }
+}
+
+/// How many times the view of the run in `out` started: its log says `serving the view` once a
+/// start (the launcher appends every start's output to logs/view.log).
+fn view_starts(out: &std::path::Path) -> usize {
+    std::fs::read_to_string(out.join("logs/view.log"))
+        .unwrap_or_default()
+        .matches("serving the view")
+        .count()
+}
+
 /// The frames agree with the stack's own topics: the first holds the arena and the whole grid
-/// of world/map's and mapping/grid's size; the truth's tick advances and each frame's true pose
-/// is world/truth's at that tick; the page's grid, rebuilt from tiles, is mapping/grid's at its
-/// tick; frames come at 5 a second or more; a goal reaches operator/goal; garbage (bad JSON, a
-/// NaN goal, a recording's timeline op, a 1 MB message) is refused and counted while the view
-/// and the stack go on.
+/// of world/map's and mapping/grid's size; of 60 frames in a row, each the view made next (their
+/// `seq` consecutive: a page that keeps up is sent every frame), the truth's tick advances and
+/// each frame's true pose is world/truth's at that tick; the page's grid, rebuilt from tiles, is
+/// mapping/grid's at its tick; a WebSocket from another origin is refused with 403, one from the
+/// page's own is let in; a goal reaches operator/goal; garbage (bad JSON, a NaN goal, a
+/// recording's timeline op, a 1 MB message) is refused and counted while the stack goes on and
+/// the view does too: the same process, started once.
 #[test]
 fn websocket_frames_match_the_stack_and_garbage_is_counted() {
     let _serial = serial();
@@ -137,6 +167,7 @@ fn websocket_frames_match_the_stack_and_garbage_is_counted() {
     let lines = stack.stdout_lines().expect("stdout");
     let url = view_url(&lines, Duration::from_secs(60));
     let ws_url = format!("{}ws", url.replacen("http://", "ws://", 1));
+    let view = pid_of(&stack.namespace, "mole-view").expect("the view runs");
     let mut witness = Witness::join(&stack.namespace);
     // A page that connects before mapping's first grid gets it whole later: connect again.
     let deadline = Instant::now() + READ_TIMEOUT;
@@ -172,13 +203,12 @@ fn websocket_frames_match_the_stack_and_garbage_is_counted() {
     );
 
     let first_grid_tick = page.tick;
-    let started = Instant::now();
-    let (mut frames, mut poses_checked) = (0u32, 0u32);
+    let mut poses_checked = 0u32;
     let mut grid_ticks_checked = Vec::new();
-    let mut ticks = Vec::new();
-    while started.elapsed() < WATCH {
+    let (mut ticks, mut seqs) = (Vec::new(), vec![first["seq"].as_u64().expect("seq")]);
+    while seqs.len() < FRAMES_WATCHED {
         let frame = next_frame(&mut socket);
-        frames += 1;
+        seqs.push(frame["seq"].as_u64().expect("seq"));
         assert_eq!(frame["full"], false);
         if let Some(update) = frame["grids"].get("frontier") {
             page.apply(update);
@@ -210,10 +240,9 @@ fn websocket_frames_match_the_stack_and_garbage_is_counted() {
             grid_ticks_checked.push(page.tick);
         }
     }
-    let seconds = started.elapsed().as_secs_f64();
     assert!(
-        f64::from(frames) / seconds >= 5.0,
-        "{frames} frames in {seconds:.1} s"
+        seqs.windows(2).all(|w| w[1] == w[0] + 1),
+        "frames skipped: seq {seqs:?}"
     );
     assert!(ticks.windows(2).all(|w| w[0] <= w[1]), "{ticks:?}");
     assert!(
@@ -225,6 +254,16 @@ fn websocket_frames_match_the_stack_and_garbage_is_counted() {
         grid_ticks_checked.iter().any(|t| *t > first_grid_tick),
         "no grid updated by tiles was compared (ticks {grid_ticks_checked:?}, first {first_grid_tick})"
     );
+
+    // Another site's page is refused before the WebSocket opens; the view's own page is not.
+    let host = url
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_string();
+    assert_eq!(handshake_from(&ws_url, "http://elsewhere.example"), 403);
+    let (address, _) = host.rsplit_once(':').expect("host:port");
+    assert_eq!(handshake_from(&ws_url, &format!("http://{address}:1")), 403);
+    assert_eq!(handshake_from(&ws_url, &format!("http://{host}")), 101);
 
     // A goal reaches operator/goal; garbage is refused, each counted once.
     socket
@@ -272,15 +311,22 @@ fn websocket_frames_match_the_stack_and_garbage_is_counted() {
         tick_after > tick_before,
         "the stack stopped after the garbage"
     );
-    assert!(
-        pid_of(&stack.namespace, "mole-view").is_some(),
-        "the view died"
+    assert_eq!(
+        pid_of(&stack.namespace, "mole-view"),
+        Some(view),
+        "the view is not the one that got the garbage"
+    );
+    assert_eq!(
+        view_starts(&stack.out),
+        1,
+        "the view was restarted:\n{}",
+        logs(&stack.out)
     );
 }
 
 /// A view killed beside `mole up` is started again by its policy on the port the page knows
 /// (`--view=0` included): a page that reconnects gets frames again, from a stack that never
-/// stopped.
+/// stopped; the view's log says it started twice.
 #[test]
 fn a_killed_view_is_started_again_on_its_port() {
     let _serial = serial();
@@ -324,6 +370,131 @@ fn a_killed_view_is_started_again_on_its_port() {
         world,
         "the stack went on as it was"
     );
+    assert_eq!(view_starts(&stack.out), 2, "{}", logs(&stack.out));
+}
+
+/// `mole up --view-no-controls`: the page is told it only watches (`controls` false), and a
+/// goal, a pause and a step are refused and counted, none reaching operator/goal or
+/// operator/pace; the run goes on unpaused.
+#[test]
+fn a_watch_only_view_refuses_and_counts_every_input() {
+    let _serial = serial();
+    let args: Vec<&str> = RUN.iter().copied().chain(["--view-no-controls"]).collect();
+    let mut stack = Stack::start("view-watch-only", &args);
+    let lines = stack.stdout_lines().expect("stdout");
+    let url = view_url(&lines, Duration::from_secs(60));
+    let ws_url = format!("{}ws", url.replacen("http://", "ws://", 1));
+    let ctx = join_realtime_stack(&stack.namespace, "view-operator-witness");
+    let mut goal = ctx.passive_subscriber(topics::OPERATOR_GOAL).expect("goal");
+    let mut pace = ctx.passive_subscriber(topics::OPERATOR_PACE).expect("pace");
+    let mut socket = connect(&ws_url);
+    let first = next_frame(&mut socket);
+    assert_eq!(first["controls"], false, "{first}");
+    assert_eq!(first["rejected_inputs"], 0);
+    send(&mut socket, json!({"goal": {"x": 3.0, "y": 3.0}}));
+    send(&mut socket, json!({"pace": "pause"}));
+    send(&mut socket, json!({"pace": "step", "steps": 5}));
+    let counted = frame_where(&mut socket, "counting 3 refused inputs", |f| {
+        f["rejected_inputs"] == 3
+    });
+    // The view reads its pages' inputs before it makes a frame: what it would have published
+    // is out by the frame after the one that counted them.
+    let seq = counted["seq"].as_u64().expect("seq");
+    let later = frame_where(&mut socket, "two frames later", |f| {
+        f["seq"].as_u64() >= Some(seq + 2)
+    });
+    assert_eq!(later["controls"], false);
+    assert_eq!(later["rejected_inputs"], 3);
+    assert!(
+        later["tick"].as_u64() > counted["tick"].as_u64(),
+        "the run paused"
+    );
+    assert_eq!(
+        (goal.drain(|_| {}), pace.drain(|_| {})),
+        (0, 0),
+        "a watch-only view published a goal or a pace"
+    );
+    assert!(goal.latest().is_none() && pace.latest().is_none());
+}
+
+/// `mole view --port P` beside a running stack, P in use, is refused with exit 2 (`mole up
+/// --view=P`: tests/bad_input.rs); `mole view --bind 0.0.0.0` warns that anyone who can reach it
+/// can watch the run (watch-only here: `--no-controls`), then serves.
+#[test]
+fn a_port_in_use_is_refused_and_serving_beyond_loopback_is_warned_of() {
+    let _serial = serial();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("a port");
+    let port = taken.local_addr().expect("its address").port().to_string();
+
+    let mut stack = Stack::start("view-port", RUN);
+    // The stack's own view serves once the stack runs: then `mole view` finds it. (The lines
+    // are kept, so that `mole up` always has a reader.)
+    let stack_lines = stack.stdout_lines().expect("stdout");
+    view_url(&stack_lines, Duration::from_secs(60));
+    let ns = stack.namespace.clone();
+    let in_use = view_command(&ns, &["--port", &port])
+        .output()
+        .expect("mole view");
+    let stderr = String::from_utf8_lossy(&in_use.stderr);
+    assert_eq!(in_use.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("cannot serve the view on 127.0.0.1:{port}")),
+        "{stderr}"
+    );
+
+    let args = ["--bind", "0.0.0.0", "--port", "0", "--no-controls"];
+    let mut elsewhere = view_command(&ns, &args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mole view --bind");
+    let stdout = elsewhere.stdout.take().expect("stdout");
+    let stderr = elsewhere.stderr.take().expect("stderr");
+    let (lines, said) = (lines_of(stdout), lines_of(stderr));
+    let url = view_url(&lines, Duration::from_secs(60));
+    let served = url
+        .strip_prefix("http://0.0.0.0:")
+        .expect("served on 0.0.0.0");
+    let mut socket = connect(&format!("ws://127.0.0.1:{}ws", served));
+    assert_eq!(next_frame(&mut socket)["controls"], false);
+    signal(elsewhere.id(), nix::sys::signal::Signal::SIGINT);
+    let status = elsewhere.wait().expect("mole view ends");
+    let warned: Vec<String> = std::iter::from_fn(|| said.recv_timeout(READ_TIMEOUT).ok()).collect();
+    assert!(
+        warned
+            .iter()
+            .any(|l| l
+                .contains("the view serves on 0.0.0.0: anyone who can reach it can watch the run")),
+        "no warning: {warned:?}"
+    );
+    assert!(status.success(), "mole view at Ctrl-C: {status}");
+    drop(stack);
+}
+
+/// `mole view --namespace NAMESPACE ARGS`, run from the workspace root.
+fn view_command(namespace: &str, args: &[&str]) -> Command {
+    let mut command = Command::new(bin_dir().join("mole"));
+    command
+        .current_dir(workspace())
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .args(["view", "--namespace", namespace])
+        .args(args)
+        .stdin(Stdio::null());
+    command
+}
+
+/// The lines of `pipe`, from a thread that reads it to its end.
+fn lines_of(pipe: impl std::io::Read + Send + 'static) -> std::sync::mpsc::Receiver<String> {
+    let (sender, lines) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(pipe).lines().map_while(Result::ok) {
+            if sender.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    lines
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ use crate::{RestartPolicy, RestartWhen};
 use clap::Args;
 use mole_types::env;
 use mole_view::{DEFAULT_PORT, VIEW_PROGRAM};
-use std::net::{IpAddr, Ipv4Addr};
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
@@ -91,6 +91,22 @@ impl UpViewArgs {
 }
 
 impl ServeArgs {
+    /// Refuses, before anything starts, a port that something else serves on already (0, any
+    /// free port, always works). `flag` is the option that named it.
+    fn check_port(&self, flag: &str) -> Result<(), Failure> {
+        if self.port == 0 {
+            return Ok(());
+        }
+        let address = SocketAddr::new(self.bind, self.port);
+        std::net::TcpListener::bind(address).map(drop).map_err(|e| {
+            Failure::input(format!(
+                "{flag}={}: cannot serve the view on {address}: {e}; expected a free port (0 \
+                 takes any)",
+                self.port
+            ))
+        })
+    }
+
     /// The view's arguments; warns when the page is served beyond this machine.
     fn view_args(&self, ready: &Path) -> Vec<String> {
         if !self.bind.is_loopback() {
@@ -143,7 +159,9 @@ pub struct ViewPlan {
 }
 
 impl ViewPlan {
+    /// The view `serve` asks for: its program found and its port free, or exit 2.
     pub fn new(serve: ServeArgs) -> Result<ViewPlan, Failure> {
+        serve.check_port("--view")?;
         Ok(ViewPlan {
             program: sidecar::program(VIEW_PROGRAM)?,
             serve,

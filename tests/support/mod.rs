@@ -527,6 +527,32 @@ pub fn python_with_mcap() -> Result<String, String> {
     ))
 }
 
+/// `node tests/support/validate_foxglove.mjs target/node-env`: Foxglove's published schemas and
+/// ajv, as scripts/node-env.sh installs them, ready to validate an export; or why it cannot
+/// run (no node, no packages).
+pub fn foxglove_validator() -> Result<Command, String> {
+    let script = workspace().join("tests/support/validate_foxglove.mjs");
+    let env_dir = workspace().join("target/node-env");
+    let validator = || {
+        let mut node = Command::new("node");
+        node.arg(&script).arg(&env_dir);
+        node
+    };
+    match validator().arg("--versions").output() {
+        Err(e) => Err(format!("no node ({e}); Debian: apt-get install nodejs npm")),
+        Ok(out) if !out.status.success() => Err(format!(
+            "node cannot load @foxglove/schemas and ajv from {} ({}); scripts/node-env.sh \
+             installs them",
+            env_dir.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .find(|l| l.contains("Error"))
+                .unwrap_or("")
+        )),
+        Ok(_) => Ok(validator()),
+    }
+}
+
 /// A context of the test's own in a running stack of clock `mode` (an operator, an observer).
 /// Its statistics are silenced: it is no role of the stack.
 pub fn join_stack(

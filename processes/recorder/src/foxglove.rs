@@ -33,119 +33,40 @@ const ELLIPSE_POINTS: usize = 36;
 /// Length of a particle's heading tick (m).
 const PARTICLE_TICK: f64 = 0.1;
 
-/// Foxglove's well-known schemas, as JSON Schema: only the fields this export fills.
+/// Foxglove's well-known schemas, as JSON Schema: the published ones (`@foxglove/schemas` 2.1.0,
+/// see `foxglove-schemas/README.md`), embedded as Foxglove writes them.
 pub mod schemas {
-    use serde_json::{Value, json};
-
-    fn number() -> Value {
-        json!({ "type": "number" })
-    }
-    fn integer() -> Value {
-        json!({ "type": "integer", "minimum": 0 })
-    }
-    fn text() -> Value {
-        json!({ "type": "string" })
-    }
-    fn object(properties: Value) -> Value {
-        json!({ "type": "object", "properties": properties })
-    }
-    fn array(items: Value) -> Value {
-        json!({ "type": "array", "items": items })
-    }
-    fn time() -> Value {
-        object(json!({ "sec": integer(), "nsec": integer() }))
-    }
-    fn vector2() -> Value {
-        object(json!({ "x": number(), "y": number() }))
-    }
-    fn vector3() -> Value {
-        object(json!({ "x": number(), "y": number(), "z": number() }))
-    }
-    fn quaternion() -> Value {
-        object(json!({ "x": number(), "y": number(), "z": number(), "w": number() }))
-    }
-    fn pose() -> Value {
-        object(json!({ "position": vector3(), "orientation": quaternion() }))
-    }
-    fn color() -> Value {
-        object(json!({ "r": number(), "g": number(), "b": number(), "a": number() }))
-    }
-    /// A named schema at the top level.
-    fn titled(title: &str, properties: Value) -> Value {
-        let mut schema = object(properties);
-        schema["title"] = json!(title);
-        schema["$schema"] = json!("https://json-schema.org/draft/2020-12/schema");
-        schema
-    }
-
     pub const POSE_IN_FRAME: &str = "foxglove.PoseInFrame";
     pub const FRAME_TRANSFORM: &str = "foxglove.FrameTransform";
     pub const LASER_SCAN: &str = "foxglove.LaserScan";
     pub const GRID: &str = "foxglove.Grid";
     pub const SCENE_UPDATE: &str = "foxglove.SceneUpdate";
 
-    /// The JSON Schema of the well-known schema `name` (`None` for one this export does not write).
-    pub fn json_schema(name: &str) -> Option<Value> {
-        let stamped = |extra: Value| {
-            let mut properties = json!({ "timestamp": time(), "frame_id": text() });
-            for (k, v) in extra.as_object().into_iter().flatten() {
-                properties[k] = v.clone();
-            }
-            properties
-        };
-        Some(match name {
-            POSE_IN_FRAME => titled(name, stamped(json!({ "pose": pose() }))),
-            FRAME_TRANSFORM => titled(
-                name,
-                json!({ "timestamp": time(), "parent_frame_id": text(),
-                        "child_frame_id": text(), "translation": vector3(),
-                        "rotation": quaternion() }),
-            ),
-            LASER_SCAN => titled(
-                name,
-                stamped(
-                    json!({ "pose": pose(), "start_angle": number(), "end_angle": number(),
-                                "ranges": array(number()), "intensities": array(number()) }),
-                ),
-            ),
-            GRID => titled(
-                name,
-                stamped(json!({
-                    "pose": pose(), "column_count": integer(), "cell_size": vector2(),
-                    "row_stride": integer(), "cell_stride": integer(),
-                    "fields": array(object(json!({ "name": text(), "offset": integer(),
-                                                   "type": integer() }))),
-                    "data": { "type": "string", "contentEncoding": "base64" },
-                })),
-            ),
-            SCENE_UPDATE => {
-                let shaped = |extra: Value| {
-                    let mut properties = json!({ "pose": pose(), "color": color() });
-                    for (k, v) in extra.as_object().into_iter().flatten() {
-                        properties[k] = v.clone();
-                    }
-                    array(object(properties))
-                };
-                let entity = object(stamped(json!({
-                    "id": text(),
-                    "lifetime": time(),
-                    "frame_locked": { "type": "boolean" },
-                    "cubes": shaped(json!({ "size": vector3() })),
-                    "spheres": shaped(json!({ "size": vector3() })),
-                    "lines": shaped(json!({ "type": integer(), "thickness": number(),
-                                            "scale_invariant": { "type": "boolean" },
-                                            "points": array(vector3()) })),
-                })));
-                titled(
-                    name,
-                    json!({ "deletions": array(object(json!({ "timestamp": time(),
-                                                              "type": integer(),
-                                                              "id": text() }))),
-                            "entities": array(entity) }),
-                )
-            }
-            _ => return None,
-        })
+    /// Every schema an export writes, with its JSON Schema text.
+    pub const ALL: [(&str, &str); 5] = [
+        (
+            POSE_IN_FRAME,
+            include_str!("../foxglove-schemas/PoseInFrame.json"),
+        ),
+        (
+            FRAME_TRANSFORM,
+            include_str!("../foxglove-schemas/FrameTransform.json"),
+        ),
+        (
+            LASER_SCAN,
+            include_str!("../foxglove-schemas/LaserScan.json"),
+        ),
+        (GRID, include_str!("../foxglove-schemas/Grid.json")),
+        (
+            SCENE_UPDATE,
+            include_str!("../foxglove-schemas/SceneUpdate.json"),
+        ),
+    ];
+
+    /// The JSON Schema text of the well-known schema `name` (`None` for one this export does
+    /// not write).
+    pub fn json_schema(name: &str) -> Option<&'static str> {
+        ALL.iter().find(|(n, _)| *n == name).map(|(_, text)| *text)
     }
 }
 
@@ -354,17 +275,40 @@ const LINE_STRIP: u32 = 0;
 const LINE_LOOP: u32 = 1;
 const LINE_LIST: u32 = 2;
 
+/// A line of one colour (no per-point `colors`) through `points` in order (no `indices`).
 fn line(kind: u32, points: Vec<Value>, thickness: f64, rgba: Value) -> Value {
     json!({ "type": kind, "pose": planar_pose(0.0, 0.0, 0.0), "thickness": thickness,
-            "scale_invariant": false, "points": points, "color": rgba })
+            "scale_invariant": false, "points": points, "color": rgba,
+            "colors": [], "indices": [] })
 }
 
-/// A scene entity `id` in the map frame: replaced by the next one of its id, shown until then.
+/// The primitives a `foxglove.SceneEntity` holds, each a list its schema requires (empty when
+/// unused).
+const PRIMITIVES: [&str; 8] = [
+    "arrows",
+    "cubes",
+    "spheres",
+    "cylinders",
+    "lines",
+    "triangles",
+    "texts",
+    "models",
+];
+
+/// A scene entity `id` in the map frame, with the primitives in `shapes` (the others empty):
+/// replaced by the next one of its id, shown until then.
 fn entity(id: &str, log_time: u64, shapes: Value) -> Value {
     let mut entity = json!({ "timestamp": timestamp(log_time), "frame_id": MAP_FRAME, "id": id,
-                             "lifetime": { "sec": 0, "nsec": 0 }, "frame_locked": false });
-    for (k, v) in shapes.as_object().into_iter().flatten() {
-        entity[k] = v.clone();
+                             "lifetime": { "sec": 0, "nsec": 0 }, "frame_locked": false,
+                             "metadata": [] });
+    debug_assert!(
+        shapes
+            .as_object()
+            .is_some_and(|s| s.keys().all(|k| PRIMITIVES.contains(&k.as_str()))),
+        "not a primitive of an entity: {shapes}"
+    );
+    for primitive in PRIMITIVES {
+        entity[primitive] = shapes.get(primitive).cloned().unwrap_or_else(|| json!([]));
     }
     entity
 }
@@ -632,8 +576,7 @@ fn export_into(input: &Path, output: &Path) -> Result<Exported, ExportError> {
                 Some(&id) => id,
                 None => {
                     let schema = schemas::json_schema(converted.schema)
-                        .expect("every converted message has a schema")
-                        .to_string();
+                        .expect("every converted message has a schema");
                     let schema_id = writer
                         .add_schema(converted.schema, JSON_SCHEMA_ENCODING, schema.as_bytes())
                         .map_err(|e| cannot_write(&e))?;
@@ -869,22 +812,100 @@ mod tests {
         assert_eq!(m["entities"][0]["lines"].as_array().unwrap().len(), 2);
     }
 
-    /// Every schema an exported message names exists and is a JSON Schema object titled with
-    /// its name.
+    /// Every schema an export writes is JSON titled with its name, as Foxglove publishes it.
     #[test]
     fn every_written_schema_is_a_titled_json_schema() {
-        for name in [
-            schemas::POSE_IN_FRAME,
-            schemas::FRAME_TRANSFORM,
-            schemas::LASER_SCAN,
-            schemas::GRID,
-            schemas::SCENE_UPDATE,
-        ] {
-            let schema = schemas::json_schema(name).expect(name);
+        for (name, text) in schemas::ALL {
+            let schema: Value = serde_json::from_str(text).expect(name);
             assert_eq!(schema["title"], name);
             assert_eq!(schema["type"], "object");
+            assert_eq!(schemas::json_schema(name), Some(text));
         }
         assert!(schemas::json_schema("foxglove.Nothing").is_none());
+    }
+
+    /// The fields `schema` requires that `value` lacks, as paths: `required`, followed through
+    /// `properties` and array `items` (what a JSON Schema validator checks first; tests/export.rs
+    /// runs a whole one over a real export).
+    fn missing(schema: &Value, value: &Value, path: &str, out: &mut Vec<String>) {
+        for field in schema["required"].as_array().into_iter().flatten() {
+            let field = field.as_str().unwrap();
+            if value.get(field).is_none() {
+                out.push(format!("{path}/{field}"));
+            }
+        }
+        for (field, inner) in schema["properties"].as_object().into_iter().flatten() {
+            if let Some(v) = value.get(field) {
+                missing(inner, v, &format!("{path}/{field}"), out);
+            }
+        }
+        if let (Some(items), Some(array)) = (schema.get("items"), value.as_array()) {
+            for (k, v) in array.iter().enumerate() {
+                missing(items, v, &format!("{path}/{k}"), out);
+            }
+        }
+    }
+
+    /// Every kind of converted message holds every field its published schema requires, down
+    /// to each entity's primitives.
+    #[test]
+    fn converted_messages_hold_every_required_field() {
+        let mut map: WorldMap = zeroed();
+        (map.n_obstacles, map.n_beacons, map.has_goal) = (1, 1, 1);
+        let mut status: PlanStatus = zeroed();
+        status.n_path = 2;
+        let mut particles: Particles = zeroed();
+        particles.n_particles = 2;
+        let mut landmarks: Landmarks = zeroed();
+        landmarks.n_landmarks = 1;
+        let mut scan: Scan = zeroed();
+        scan.n_beams = 3;
+        let mut grid: Grid = zeroed();
+        (grid.width, grid.height) = (2, 2);
+        let samples: [(&str, Vec<u8>); 8] = [
+            (
+                topics::WORLD_TRUTH.name,
+                bytemuck::bytes_of(&truth(1, 1.0)).to_vec(),
+            ),
+            (
+                topics::LOCALIZATION_POSE.name,
+                bytemuck::bytes_of(&zeroed::<Pose>()).to_vec(),
+            ),
+            (
+                topics::SENSING_SCAN.name,
+                bytemuck::bytes_of(&scan).to_vec(),
+            ),
+            (
+                topics::MAPPING_GRID.name,
+                bytemuck::bytes_of(&grid).to_vec(),
+            ),
+            (topics::WORLD_MAP.name, bytemuck::bytes_of(&map).to_vec()),
+            (
+                topics::PLANNING_STATUS.name,
+                bytemuck::bytes_of(&status).to_vec(),
+            ),
+            (
+                topics::LOCALIZATION_PARTICLES.name,
+                bytemuck::bytes_of(&particles).to_vec(),
+            ),
+            (
+                topics::LOCALIZATION_LANDMARKS.name,
+                bytemuck::bytes_of(&landmarks).to_vec(),
+            ),
+        ];
+        let mut converter = Converter::default();
+        let mut schemas_seen = std::collections::BTreeSet::new();
+        for (topic, data) in samples {
+            for converted in converter.convert(topic, 1, &data) {
+                let text = schemas::json_schema(converted.schema).expect(converted.schema);
+                let schema: Value = serde_json::from_str(text).unwrap();
+                let mut lacking = Vec::new();
+                missing(&schema, &converted.message, "", &mut lacking);
+                assert!(lacking.is_empty(), "{}: lacks {lacking:?}", converted.topic);
+                schemas_seen.insert(converted.schema);
+            }
+        }
+        assert_eq!(schemas_seen.len(), schemas::ALL.len());
     }
 
     /// A recording exports into a file of Foxglove channels whose truths are the recorded ones,

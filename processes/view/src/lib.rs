@@ -1,6 +1,7 @@
 //! The view: a live picture of a running stack in a browser, served by mole itself.
 //!
-//! The pure part lives here and is tested without IPC: the [`scene`] (what the view knows of the
+//! The pure part lives here and is tested without IPC: the [`frame_clock`] (a frame every
+//! [`FRAME_PERIOD`]), the [`scene`] (what the view knows of the
 //! stack, fed one sample of one topic at a time, and the [`Frame`] it makes), the grids' [`tiles`]
 //! (only what changed is sent), what one page is sent ([`protocol`]) and what a page may send
 //! back ([`input`]), and a recording's [`playback`] (its samples indexed per topic by tick, a
@@ -9,12 +10,14 @@
 //! publishes the page's goals and paces on `operator/goal` and `operator/pace`; with `--file` it
 //! feeds it from a recording instead, with no IPC at all.
 
+pub mod frame_clock;
 pub mod input;
 pub mod playback;
 pub mod protocol;
 pub mod scene;
 pub mod tiles;
 
+pub use frame_clock::{FRAME_PERIOD, FRAMES_PER_SECOND, FrameClock};
 pub use input::{
     Access, Command, MAX_INPUT_BYTES, MAX_SPEED, MIN_SPEED, Rejected, TimelineOp, admit,
     parse_input,

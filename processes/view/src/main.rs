@@ -1,7 +1,7 @@
 //! The view process: a live picture of the stack in a browser.
 //!
 //! Every shown topic (read at the view's own pace: woken by the truth once a step in lockstep,
-//! never woken in realtime) → the scene → every [`FRAME_PERIOD`] the newest frame → the server
+//! never woken in realtime) → the scene → every [`mole_view::FRAME_PERIOD`] a frame → the server
 //! thread → each page (only what changed for it). A page's goals and paces → the main loop →
 //! `operator/goal`, `operator/pace`.
 //!
@@ -18,17 +18,14 @@ mod taps;
 use clap::Parser;
 use mole_runtime::{BadInput, CommonArgs, Context, Publisher, Wake, now_ns};
 use mole_types::{Goal, PACE_PAUSE, PACE_RUN, PACE_STEP, Pace, topics};
-use mole_view::{Access, Command, DEFAULT_PORT, Playback, Reel, Scene};
+use mole_view::{Access, Command, DEFAULT_PORT, FrameClock, Playback, Reel, Scene};
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 use taps::Taps;
-
-/// How often a frame goes to the pages: 20 a second.
-const FRAME_PERIOD: Duration = Duration::from_millis(50);
 
 #[derive(Debug, Parser)]
 #[command(
@@ -124,7 +121,7 @@ fn announce(args: &Args, url: &str) -> std::io::Result<()> {
 }
 
 /// The recording's view: read the file (refused before anything is served), then every
-/// [`FRAME_PERIOD`] the pages' timeline ops, the clock, the frame at its tick; until Ctrl-C or
+/// [`mole_view::FRAME_PERIOD`] the pages' timeline ops, the clock, the frame at its tick; until Ctrl-C or
 /// SIGTERM.
 fn recording(file: &std::path::Path, args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     mole_runtime::init_tracing("view");
@@ -147,7 +144,12 @@ fn recording(file: &std::path::Path, args: &Args) -> Result<(), Box<dyn std::err
     );
     let mut frames = 0u64;
     let mut last = Instant::now();
+    let (started, mut schedule) = (last, FrameClock::new(last));
     while !stop.load(Ordering::SeqCst) {
+        std::thread::sleep(schedule.next().saturating_duration_since(Instant::now()));
+        if !schedule.due(Instant::now()) {
+            continue;
+        }
         for command in served.commands.try_iter() {
             if let Command::Timeline(op) = command {
                 tracing::debug!(?op, "from the page");
@@ -158,14 +160,12 @@ fn recording(file: &std::path::Path, args: &Args) -> Result<(), Box<dyn std::err
         playback.clock.advance(now - last);
         last = now;
         let rejected = served.rejected.load(Ordering::Relaxed);
-        served
-            .frames
-            .send_replace(Some(Arc::new(playback.frame(rejected))));
+        served.frames.send(playback.frame(rejected));
         frames += 1;
-        std::thread::sleep(FRAME_PERIOD.saturating_sub(now.elapsed()));
     }
     tracing::info!(
         frames,
+        elapsed_s = started.elapsed().as_secs_f64(),
         rejected_inputs = served.rejected.load(Ordering::Relaxed),
         "view finished"
     );
@@ -198,24 +198,22 @@ fn live(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
 
     let mut scene: Option<Scene> = None;
     let mut frames = 0u64;
-    let mut next_frame = Instant::now();
+    let started = Instant::now();
+    let mut schedule = FrameClock::new(started);
     loop {
-        let wake = waitset.wait(&mut ctx, Some(next_frame))?;
+        let wake = waitset.wait(&mut ctx, Some(schedule.next()))?;
         taps.drain(&mut scene, mode.name(), !args.no_controls);
         let commands: Vec<Command> = served.commands.try_iter().collect();
         if !commands.is_empty() {
             let tick = scene.as_ref().map_or(0, Scene::tick);
             controls.publish(commands, tick)?;
         }
-        if Instant::now() >= next_frame {
-            next_frame = Instant::now() + FRAME_PERIOD;
-            if let Some(scene) = scene.as_mut() {
-                let rejected = served.rejected.load(Ordering::Relaxed);
-                served
-                    .frames
-                    .send_replace(Some(Arc::new(scene.frame(rejected))));
-                frames += 1;
-            }
+        if schedule.due(Instant::now())
+            && let Some(scene) = scene.as_mut()
+        {
+            let rejected = served.rejected.load(Ordering::Relaxed);
+            served.frames.send(scene.frame(rejected));
+            frames += 1;
         }
         if wake == Wake::Shutdown {
             break;
@@ -223,6 +221,7 @@ fn live(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     }
     tracing::info!(
         frames,
+        elapsed_s = started.elapsed().as_secs_f64(),
         rejected_inputs = served.rejected.load(Ordering::Relaxed),
         "view finished"
     );

@@ -1,7 +1,9 @@
 //! The page and its WebSocket: axum on a single-threaded tokio runtime in a thread of its own.
 //!
-//! Frames come from the main loop through a `watch` (the newest only: a slow page skips frames);
-//! each page's task keeps what it was sent ([`Client`]) and sends only the tiles that changed.
+//! Frames come from the main loop through a `broadcast` queue of [`FRAMES_QUEUED`]: a page that
+//! keeps up is sent every frame, even when its task was not run for a few frame periods (a loaded
+//! machine); one further behind skips to the newest. Each page's task keeps what it was sent
+//! ([`Client`]) and sends only the tiles that changed.
 //! A page's inputs go back to the main loop through a std channel; refused ones are counted
 //! and logged at debug.
 
@@ -15,19 +17,31 @@ use mole_view::{Access, Client, Command, Frame, MAX_INPUT_BYTES, Rejected, admit
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
-use tokio::sync::watch;
+use tokio::sync::broadcast;
+use tokio::sync::broadcast::error::{RecvError, TryRecvError};
 
 const INDEX_HTML: &str = include_str!("../assets/index.html");
 const VIEW_JS: &str = include_str!("../assets/view.js");
 const VIEW_CSS: &str = include_str!("../assets/view.css");
 
-/// The newest frame, none before the world's map.
-pub type Frames = watch::Sender<Option<Arc<Frame>>>;
+/// Frames a page may be behind before it skips to the newest: half a second of them.
+pub const FRAMES_QUEUED: usize = 10;
+
+/// Where the main loop sends each frame to every page.
+#[derive(Clone)]
+pub struct Frames(broadcast::Sender<Arc<Frame>>);
+
+impl Frames {
+    /// Sends `frame` to every page (none may be open).
+    pub fn send(&self, frame: Frame) {
+        let _ = self.0.send(Arc::new(frame));
+    }
+}
 
 /// What every page's task shares.
 #[derive(Clone)]
 struct Shared {
-    frames: watch::Receiver<Option<Arc<Frame>>>,
+    frames: broadcast::Sender<Arc<Frame>>,
     commands: mpsc::Sender<Command>,
     rejected: Arc<AtomicU64>,
     access: Access,
@@ -64,11 +78,11 @@ pub fn serve(listener: std::net::TcpListener, access: Access) -> std::io::Result
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
-    let (frames, frames_out) = watch::channel(None);
+    let (frames, _) = broadcast::channel(FRAMES_QUEUED);
     let (commands_in, commands) = mpsc::channel();
     let rejected = Arc::new(AtomicU64::new(0));
     let shared = Shared {
-        frames: frames_out,
+        frames: frames.clone(),
         commands: commands_in,
         rejected: rejected.clone(),
         access,
@@ -91,7 +105,7 @@ pub fn serve(listener: std::net::TcpListener, access: Access) -> std::io::Result
             })
         })?;
     Ok(Served {
-        frames,
+        frames: Frames(frames),
         commands,
         rejected,
     })
@@ -145,20 +159,36 @@ fn too_long(error: &axum::Error) -> bool {
     false
 }
 
-/// One page: every new frame out (as what changed for it), its inputs in, until it leaves or
-/// the view ends.
+/// The newest frame queued for a page that fell behind (`None`: none queued any more).
+fn newest(frames: &mut broadcast::Receiver<Arc<Frame>>) -> Option<Arc<Frame>> {
+    let mut newest = None;
+    loop {
+        match frames.try_recv() {
+            Ok(frame) => newest = Some(frame),
+            Err(TryRecvError::Lagged(_)) => {}
+            Err(TryRecvError::Empty | TryRecvError::Closed) => return newest,
+        }
+    }
+}
+
+/// One page: every frame made from its connection on out (as what changed for it; the newest
+/// only once it fell [`FRAMES_QUEUED`] behind), its inputs in, until it leaves or the view ends.
 async fn page(mut socket: WebSocket, shared: Shared) {
-    let mut frames = shared.frames.clone();
+    let mut frames = shared.frames.subscribe();
     let mut client = Client::default();
-    frames.mark_changed();
     loop {
         tokio::select! {
-            changed = frames.changed() => {
-                if changed.is_err() {
-                    break;
-                }
-                let Some(frame) = frames.borrow_and_update().clone() else {
-                    continue;
+            received = frames.recv() => {
+                let frame = match received {
+                    Ok(frame) => frame,
+                    Err(RecvError::Lagged(skipped)) => {
+                        tracing::debug!(skipped, "a page fell behind: it skips to the newest frame");
+                        let Some(frame) = newest(&mut frames) else {
+                            continue;
+                        };
+                        frame
+                    }
+                    Err(RecvError::Closed) => break,
                 };
                 let text = client.message(&frame);
                 if socket.send(Message::Text(text.into())).await.is_err() {

@@ -2,7 +2,7 @@
 //!
 //! In lockstep a full queue makes its publisher wait, so every queue is read each step: the
 //! world's truth (published once a step) wakes the view, as it wakes the recorder. In realtime
-//! nothing wakes it: it drains every [`crate::FRAME_PERIOD`], and a queue that filled meanwhile
+//! nothing wakes it: it drains every [`mole_view::FRAME_PERIOD`], and a queue that filled meanwhile
 //! drops its oldest samples (the view shows the newest). The truth, the statistics and the
 //! process table are handed to the scene sample by sample (latency window, CPU deltas, events);
 //! of the others only the newest sample, once per drain.
