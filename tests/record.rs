@@ -374,34 +374,58 @@ fn mole_record_attaches_to_a_running_stack_until_it_ends() {
     assert_eq!(ticks, (first..=last).collect::<Vec<_>>());
 }
 
-/// Bad recording settings, and `mole record` where no stack runs, are refused with exit 2
-/// before anything starts, naming what is wrong.
-#[test]
-fn bad_recording_settings_are_refused_before_anything_starts() {
+/// `mole up` with `args` in a fresh namespace, expected to refuse them: its output, and whether
+/// it started nothing (no process of its namespace, no process's log).
+fn refused_up(args: &[&str]) -> (Output, bool) {
     let namespace = unique_namespace("bad-record");
     let out = std::env::temp_dir().join(format!("mole-{namespace}"));
-    let file = out.join(RECORDING).display().to_string();
-    let output = run_mole(&[
-        "up",
-        "--record",
-        &file,
-        "--record-every",
-        "mapping/gird=3",
-        "--namespace",
-        &namespace,
-        "--out",
-        &out.display().to_string(),
-        "--quiet",
-    ]);
-    let refused = processes_of(&namespace).is_empty() && !Path::new(&file).exists();
+    let out_text = out.display().to_string();
+    let mut up = vec!["up"];
+    up.extend_from_slice(args);
+    up.extend(["--namespace", &namespace, "--out", &out_text, "--quiet"]);
+    let output = run_mole(&up);
+    let logs = std::fs::read_dir(out.join("logs")).map_or(0, |entries| entries.count());
+    let nothing = processes_of(&namespace).is_empty() && logs == 0;
+    stop_and_clean(None, &namespace);
     let _ = std::fs::remove_dir_all(&out);
+    (output, nothing)
+}
+
+/// Bad recording settings (a topic that is not one, a FILE that cannot be written: below a
+/// file, a directory, in /proc, where not even root creates files), and `mole record` where no
+/// stack runs, are refused with exit 2 before anything starts, naming what is wrong.
+#[test]
+fn bad_recording_settings_are_refused_before_anything_starts() {
+    let dir = TempDir::new("bad-record");
+    let file = dir.0.join(RECORDING).display().to_string();
+    let (output, nothing) = refused_up(&["--record", &file, "--record-every", "mapping/gird=3"]);
     let error = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{error}");
     assert!(
         error.contains("--record-every `mapping/gird=3`: `mapping/gird` is not a topic"),
         "{error}"
     );
-    assert!(refused, "nothing started, nothing written");
+    assert!(nothing, "nothing started: {error}");
+    assert!(!Path::new(&file).exists(), "nothing written");
+
+    let plain = dir.0.join("plain");
+    std::fs::write(&plain, b"a file, not a directory").expect("write a file");
+    let below_a_file = plain.join(RECORDING).display().to_string();
+    let a_directory = dir.0.display().to_string();
+    let in_proc = format!("/proc/mole-{}.mcap", std::process::id());
+    for path in [&below_a_file, &a_directory, &in_proc] {
+        let (output, nothing) =
+            refused_up(&["--mode", "lockstep", "--ticks", "50", "--record", path]);
+        let error = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "--record {path}: {error}");
+        assert!(
+            error.contains(&format!("cannot record to {path}: ")),
+            "{error}"
+        );
+        assert!(nothing, "--record {path}: something started: {error}");
+    }
+
+    let namespace = unique_namespace("bad-record");
     let output = run_mole(&["record", "--namespace", &namespace, &file]);
     let error = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{error}");
