@@ -78,23 +78,154 @@ fn lockstep_run(test: &str, ticks: u64, seed: u64, record: bool) -> Run {
     run
 }
 
-/// Every message a streaming reader gets from `bytes` before the first error, as (topic,
-/// log time, payload).
-fn stream(bytes: &[u8]) -> Vec<(String, u64, Vec<u8>)> {
+/// A recorded message: its channel's topic, its log time and its bytes.
+type Message = (String, u64, Vec<u8>);
+
+/// Every message of a finished recording, as a streaming reader reads it (any error fails).
+fn stream(bytes: &[u8]) -> Vec<Message> {
     mcap::MessageStream::new(bytes)
         .expect("an MCAP file")
-        .map_while(Result::ok)
+        .map(|m| m.expect("a finished recording reads to its end"))
         .map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned()))
         .collect()
 }
 
-/// The truths of a recording, in file order.
-fn truths(bytes: &[u8]) -> Vec<(u64, Truth)> {
-    stream(bytes)
-        .into_iter()
+/// The truths among `messages`, in file order.
+fn truths_of(messages: &[Message]) -> Vec<(u64, Truth)> {
+    messages
+        .iter()
         .filter(|(topic, _, _)| topic == topics::WORLD_TRUTH.name)
-        .map(|(_, time, data)| (time, bytemuck::pod_read_unaligned::<Truth>(&data)))
+        .map(|(_, time, data)| (*time, bytemuck::pod_read_unaligned::<Truth>(data)))
         .collect()
+}
+
+/// The truths of a finished recording, in file order.
+fn truths(bytes: &[u8]) -> Vec<(u64, Truth)> {
+    truths_of(&stream(bytes))
+}
+
+/// What the `mcap` crate's linear reader finds in a file a killed recorder left, record by
+/// record, chunks whole, each chunk then read on its own (CRCs checked, every message decoded
+/// against its channel's schema).
+struct Salvage {
+    /// Every message of every chunk that reads whole, in file order.
+    messages: Vec<Message>,
+    /// The starts of the chunk records (for a test to damage one).
+    chunks: Vec<usize>,
+    /// Where the last chunk record that lies whole in the file ends.
+    last_chunk_end: usize,
+    /// The first byte from which nothing reads: the start of the record where the walk stopped
+    /// or of the first record that does not read whole, whichever comes first.
+    first_unreadable: usize,
+    /// Why the walk stopped.
+    stop: Option<mcap::McapError>,
+    /// Why the first record (a chunk with what it holds) that does not read whole does not.
+    bad_record: Option<String>,
+}
+
+/// Walks `bytes` with the linear reader, fed exactly the bytes it asks for, so that what it was
+/// fed ends where the record it yields ends.
+fn salvage(bytes: &[u8]) -> Salvage {
+    use mcap::records::Record;
+    use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    let sizes: std::collections::BTreeMap<&str, usize> = mole_types::layout::all()
+        .into_iter()
+        .map(|t| (t.type_name, t.size))
+        .collect();
+    let mut reader =
+        LinearReader::new_with_options(LinearReaderOptions::default().with_emit_chunks(true));
+    let (mut fed, mut start) = (0, mcap::MAGIC.len());
+    let mut schemas = std::collections::BTreeMap::new();
+    let mut channels = std::collections::BTreeMap::new();
+    let mut found = Salvage {
+        messages: Vec::new(),
+        chunks: Vec::new(),
+        last_chunk_end: 0,
+        first_unreadable: bytes.len(),
+        stop: None,
+        bad_record: None,
+    };
+    // A record at the top level or inside a chunk: schemas and channels are kept, a message is
+    // decoded (its size is its schema's type's, an event is JSON).
+    let mut take = |record: Record, out: &mut Vec<Message>| -> Result<(), String> {
+        match record {
+            Record::Schema { header, .. } => {
+                schemas.insert(header.id, header.name);
+            }
+            Record::Channel(channel) => {
+                channels.insert(channel.id, (channel.topic, channel.schema_id));
+            }
+            Record::Message { header, data } => {
+                let (topic, schema) = channels.get(&header.channel_id).ok_or(format!(
+                    "a message of unknown channel {}",
+                    header.channel_id
+                ))?;
+                let type_name = schemas.get(schema).map_or("", String::as_str);
+                let decodes = match sizes.get(type_name) {
+                    Some(size) => data.len() == *size,
+                    None => serde_json::from_slice::<serde_json::Value>(&data).is_ok(),
+                };
+                if !decodes {
+                    return Err(format!("a {topic} message of {} bytes", data.len()));
+                }
+                out.push((topic.clone(), header.log_time, data.into_owned()));
+            }
+            _ => {}
+        }
+        Ok(())
+    };
+    while let Some(event) = reader.next_event() {
+        match event {
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let n = need.min(bytes.len() - fed);
+                reader.insert(n).copy_from_slice(&bytes[fed..fed + n]);
+                reader.notify_read(n);
+                fed += n;
+            }
+            Ok(LinearReadEvent::Record { opcode, data }) => {
+                let record = match mcap::parse_record(opcode, data) {
+                    Ok(record) => record,
+                    Err(e) => {
+                        found.stop = Some(e);
+                        break;
+                    }
+                };
+                let end = fed;
+                let mut messages = Vec::new();
+                let read = match record {
+                    Record::Chunk { header, data } => {
+                        found.chunks.push(start);
+                        found.last_chunk_end = end;
+                        mcap::read::ChunkReader::new(header, &data)
+                            .map_err(|e| e.to_string())
+                            .and_then(|records| {
+                                records.into_iter().try_for_each(|r| {
+                                    take(r.map_err(|e| e.to_string())?, &mut messages)
+                                })
+                            })
+                    }
+                    record => take(record, &mut messages),
+                };
+                match read {
+                    _ if found.bad_record.is_some() => {}
+                    Ok(()) => found.messages.extend(messages),
+                    Err(why) => {
+                        found.bad_record = Some(format!("the record at {start}: {why}"));
+                        found.first_unreadable = start;
+                    }
+                }
+                start = end;
+            }
+            Err(e) => {
+                found.stop = Some(e);
+                break;
+            }
+        }
+    }
+    if found.stop.is_some() && found.bad_record.is_none() {
+        found.first_unreadable = start;
+    }
+    found
 }
 
 /// Waits for `child`; kills it and fails after `timeout` (it would hang otherwise).
@@ -214,8 +345,10 @@ fn mole_info_lists_every_topic_with_plausible_counts() {
     assert!(error.contains("not an MCAP file"), "{error}");
 }
 
-/// A recorder SIGKILLed mid-run does not stop the run, and leaves a file whose complete chunks a
-/// streaming reader reads: truths of consecutive ticks from 0, each at its simulated time.
+/// A recorder SIGKILLed mid-run does not stop the run, and leaves a file that reads up to the
+/// record it was writing: the first byte that does not read lies after the last complete chunk,
+/// every message of every complete chunk decodes, and the truths are of consecutive ticks from
+/// 0, each at its simulated time.
 #[test]
 fn a_killed_recorder_leaves_every_complete_chunk_readable() {
     let _serial = serial();
@@ -250,7 +383,25 @@ fn a_killed_recorder_leaves_every_complete_chunk_readable() {
     );
     assert_eq!(run.summary.expect("a summary").ticks, 3000);
 
-    let truths = truths(&killed_at);
+    let found = salvage(&killed_at);
+    assert!(
+        matches!(found.stop, Some(mcap::McapError::UnexpectedEof)),
+        "the walk stops at the cut, not at {:?} ({} bytes)",
+        found.stop,
+        killed_at.len()
+    );
+    assert!(
+        found.first_unreadable >= found.last_chunk_end,
+        "nothing reads from byte {} on ({}), yet a complete chunk ends at {} (chunks at {:?}, \
+         {} bytes)",
+        found.first_unreadable,
+        found.bad_record.as_deref().unwrap_or("the cut"),
+        found.last_chunk_end,
+        found.chunks,
+        killed_at.len()
+    );
+    assert!(found.chunks.len() > 1, "chunks at {:?}", found.chunks);
+    let truths = truths_of(&found.messages);
     assert!(
         !truths.is_empty(),
         "no complete chunk in {} bytes",
