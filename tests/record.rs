@@ -15,6 +15,8 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(240);
 struct Run {
     output: Output,
     logs: String,
+    /// The recorder's whole log (empty when it did not run).
+    recorder_log: String,
     summary: Option<Summary>,
     recording: Option<Vec<u8>>,
 }
@@ -51,6 +53,7 @@ fn finish(stack: Stack) -> Run {
     let logs = logs(&keep);
     let summary = keep.join("summary.json").exists().then(|| summary(&keep));
     let recording = std::fs::read(keep.join(RECORDING)).ok();
+    let recorder_log = std::fs::read_to_string(keep.join("logs/recorder.log")).unwrap_or_default();
     let _ = std::fs::remove_dir_all(&keep);
     assert!(
         processes_of(&namespace).is_empty(),
@@ -59,6 +62,7 @@ fn finish(stack: Stack) -> Run {
     Run {
         output,
         logs,
+        recorder_log,
         summary,
         recording,
     }
@@ -423,6 +427,51 @@ fn a_killed_recorder_leaves_every_complete_chunk_readable() {
     let output = mole_info("killed", &killed_at);
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("truncated"));
+}
+
+/// The count `name=N` in a log line (colour codes around it or not).
+fn count_in(line: &str, name: &str) -> u64 {
+    let plain: String = line
+        .split('\x1b')
+        .enumerate()
+        .map(|(i, part)| match i {
+            0 => part,
+            _ => part.split_once('m').map_or("", |(_, rest)| rest),
+        })
+        .collect();
+    plain
+        .split_whitespace()
+        .find_map(|word| word.strip_prefix(&format!("{name}=")))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no `{name}=N` in `{plain}`"))
+}
+
+/// In realtime nothing wakes the recorder: every subscription is passive, so however many
+/// messages it records, no publisher signals it once; it drains its queues on its own timer.
+#[test]
+fn the_recorder_is_never_woken_by_a_publisher_in_realtime() {
+    let _serial = serial();
+    let run = finish(start(
+        "realtime-wakes",
+        &["--mode", "realtime", "--ticks", "300"],
+        true,
+    ));
+    assert!(run.output.status.success(), "{}", run.logs);
+    let messages = stream(&run.recording.expect("a recording")).len() as u64;
+    let finished = run
+        .recorder_log
+        .lines()
+        .find(|l| l.contains("recording finished"))
+        .unwrap_or_else(|| panic!("the recorder did not finish:\n{}", run.recorder_log));
+    assert_eq!(count_in(finished, "messages"), messages, "{finished}");
+    let ticks = run.summary.expect("a summary").ticks;
+    assert!(messages > 3 * ticks, "{messages} messages in {ticks} ticks");
+    let (woken, drains) = (count_in(finished, "woken"), count_in(finished, "drains"));
+    assert_eq!(
+        woken, 0,
+        "woken {woken} times by publishers for {messages} messages ({drains} drains)"
+    );
+    assert!(drains > 0, "{finished}");
 }
 
 /// A process killed mid-run is restarted and another swapped, the recording goes on across
