@@ -46,10 +46,11 @@ fn recording_of(stack: &Stack) -> PathBuf {
 
 /// Waits for the run to end and keeps what it left.
 fn finish(stack: Stack) -> Run {
-    let namespace = stack.namespace.clone();
-    let keep = stack.out.with_extension("kept");
+    let (namespace, out) = (stack.namespace.clone(), stack.out.clone());
+    let keep = out.with_extension("kept");
     let _ = std::fs::remove_dir_all(&keep);
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
+    let _ = std::fs::remove_dir_all(&out);
     let logs = logs(&keep);
     let summary = keep.join("summary.json").exists().then(|| summary(&keep));
     let recording = std::fs::read(keep.join(RECORDING)).ok();

@@ -120,8 +120,9 @@ fn record(dir: &Path) -> (PathBuf, String) {
             &path,
         ],
     );
-    let namespace = stack.namespace.clone();
+    let (namespace, out) = (stack.namespace.clone(), stack.out.clone());
     let output = stack.wait(RUN_TIMEOUT);
+    let _ = std::fs::remove_dir_all(&out);
     assert!(
         output.status.success(),
         "recording failed: {}",
@@ -407,6 +408,9 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
         running,
         "a replay process started"
     );
+    let out = busy.out.clone();
+    drop(busy);
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// A file that is not there, a file that is not a recording and a role the graph does not have
