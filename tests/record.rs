@@ -15,6 +15,8 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(240);
 struct Run {
     output: Output,
     logs: String,
+    /// The recorder's whole log (empty when it did not run).
+    recorder_log: String,
     summary: Option<Summary>,
     recording: Option<Vec<u8>>,
 }
@@ -44,13 +46,15 @@ fn recording_of(stack: &Stack) -> PathBuf {
 
 /// Waits for the run to end and keeps what it left.
 fn finish(stack: Stack) -> Run {
-    let namespace = stack.namespace.clone();
-    let keep = stack.out.with_extension("kept");
+    let (namespace, out) = (stack.namespace.clone(), stack.out.clone());
+    let keep = out.with_extension("kept");
     let _ = std::fs::remove_dir_all(&keep);
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
+    let _ = std::fs::remove_dir_all(&out);
     let logs = logs(&keep);
     let summary = keep.join("summary.json").exists().then(|| summary(&keep));
     let recording = std::fs::read(keep.join(RECORDING)).ok();
+    let recorder_log = std::fs::read_to_string(keep.join("logs/recorder.log")).unwrap_or_default();
     let _ = std::fs::remove_dir_all(&keep);
     assert!(
         processes_of(&namespace).is_empty(),
@@ -59,6 +63,7 @@ fn finish(stack: Stack) -> Run {
     Run {
         output,
         logs,
+        recorder_log,
         summary,
         recording,
     }
@@ -78,23 +83,154 @@ fn lockstep_run(test: &str, ticks: u64, seed: u64, record: bool) -> Run {
     run
 }
 
-/// Every message a streaming reader gets from `bytes` before the first error, as (topic,
-/// log time, payload).
-fn stream(bytes: &[u8]) -> Vec<(String, u64, Vec<u8>)> {
+/// A recorded message: its channel's topic, its log time and its bytes.
+type Message = (String, u64, Vec<u8>);
+
+/// Every message of a finished recording, as a streaming reader reads it (any error fails).
+fn stream(bytes: &[u8]) -> Vec<Message> {
     mcap::MessageStream::new(bytes)
         .expect("an MCAP file")
-        .map_while(Result::ok)
+        .map(|m| m.expect("a finished recording reads to its end"))
         .map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned()))
         .collect()
 }
 
-/// The truths of a recording, in file order.
-fn truths(bytes: &[u8]) -> Vec<(u64, Truth)> {
-    stream(bytes)
-        .into_iter()
+/// The truths among `messages`, in file order.
+fn truths_of(messages: &[Message]) -> Vec<(u64, Truth)> {
+    messages
+        .iter()
         .filter(|(topic, _, _)| topic == topics::WORLD_TRUTH.name)
-        .map(|(_, time, data)| (time, bytemuck::pod_read_unaligned::<Truth>(&data)))
+        .map(|(_, time, data)| (*time, bytemuck::pod_read_unaligned::<Truth>(data)))
         .collect()
+}
+
+/// The truths of a finished recording, in file order.
+fn truths(bytes: &[u8]) -> Vec<(u64, Truth)> {
+    truths_of(&stream(bytes))
+}
+
+/// What the `mcap` crate's linear reader finds in a file a killed recorder left, record by
+/// record, chunks whole, each chunk then read on its own (CRCs checked, every message decoded
+/// against its channel's schema).
+struct Salvage {
+    /// Every message of every chunk that reads whole, in file order.
+    messages: Vec<Message>,
+    /// The starts of the chunk records (for a test to damage one).
+    chunks: Vec<usize>,
+    /// Where the last chunk record that lies whole in the file ends.
+    last_chunk_end: usize,
+    /// The first byte from which nothing reads: the start of the record where the walk stopped
+    /// or of the first record that does not read whole, whichever comes first.
+    first_unreadable: usize,
+    /// Why the walk stopped.
+    stop: Option<mcap::McapError>,
+    /// Why the first record (a chunk with what it holds) that does not read whole does not.
+    bad_record: Option<String>,
+}
+
+/// Walks `bytes` with the linear reader, fed exactly the bytes it asks for, so that what it was
+/// fed ends where the record it yields ends.
+fn salvage(bytes: &[u8]) -> Salvage {
+    use mcap::records::Record;
+    use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    let sizes: std::collections::BTreeMap<&str, usize> = mole_types::layout::all()
+        .into_iter()
+        .map(|t| (t.type_name, t.size))
+        .collect();
+    let mut reader =
+        LinearReader::new_with_options(LinearReaderOptions::default().with_emit_chunks(true));
+    let (mut fed, mut start) = (0, mcap::MAGIC.len());
+    let mut schemas = std::collections::BTreeMap::new();
+    let mut channels = std::collections::BTreeMap::new();
+    let mut found = Salvage {
+        messages: Vec::new(),
+        chunks: Vec::new(),
+        last_chunk_end: 0,
+        first_unreadable: bytes.len(),
+        stop: None,
+        bad_record: None,
+    };
+    // A record at the top level or inside a chunk: schemas and channels are kept, a message is
+    // decoded (its size is its schema's type's, an event is JSON).
+    let mut take = |record: Record, out: &mut Vec<Message>| -> Result<(), String> {
+        match record {
+            Record::Schema { header, .. } => {
+                schemas.insert(header.id, header.name);
+            }
+            Record::Channel(channel) => {
+                channels.insert(channel.id, (channel.topic, channel.schema_id));
+            }
+            Record::Message { header, data } => {
+                let (topic, schema) = channels.get(&header.channel_id).ok_or(format!(
+                    "a message of unknown channel {}",
+                    header.channel_id
+                ))?;
+                let type_name = schemas.get(schema).map_or("", String::as_str);
+                let decodes = match sizes.get(type_name) {
+                    Some(size) => data.len() == *size,
+                    None => serde_json::from_slice::<serde_json::Value>(&data).is_ok(),
+                };
+                if !decodes {
+                    return Err(format!("a {topic} message of {} bytes", data.len()));
+                }
+                out.push((topic.clone(), header.log_time, data.into_owned()));
+            }
+            _ => {}
+        }
+        Ok(())
+    };
+    while let Some(event) = reader.next_event() {
+        match event {
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let n = need.min(bytes.len() - fed);
+                reader.insert(n).copy_from_slice(&bytes[fed..fed + n]);
+                reader.notify_read(n);
+                fed += n;
+            }
+            Ok(LinearReadEvent::Record { opcode, data }) => {
+                let record = match mcap::parse_record(opcode, data) {
+                    Ok(record) => record,
+                    Err(e) => {
+                        found.stop = Some(e);
+                        break;
+                    }
+                };
+                let end = fed;
+                let mut messages = Vec::new();
+                let read = match record {
+                    Record::Chunk { header, data } => {
+                        found.chunks.push(start);
+                        found.last_chunk_end = end;
+                        mcap::read::ChunkReader::new(header, &data)
+                            .map_err(|e| e.to_string())
+                            .and_then(|records| {
+                                records.into_iter().try_for_each(|r| {
+                                    take(r.map_err(|e| e.to_string())?, &mut messages)
+                                })
+                            })
+                    }
+                    record => take(record, &mut messages),
+                };
+                match read {
+                    _ if found.bad_record.is_some() => {}
+                    Ok(()) => found.messages.extend(messages),
+                    Err(why) => {
+                        found.bad_record = Some(format!("the record at {start}: {why}"));
+                        found.first_unreadable = start;
+                    }
+                }
+                start = end;
+            }
+            Err(e) => {
+                found.stop = Some(e);
+                break;
+            }
+        }
+    }
+    if found.stop.is_some() && found.bad_record.is_none() {
+        found.first_unreadable = start;
+    }
+    found
 }
 
 /// Waits for `child`; kills it and fails after `timeout` (it would hang otherwise).
@@ -214,8 +350,10 @@ fn mole_info_lists_every_topic_with_plausible_counts() {
     assert!(error.contains("not an MCAP file"), "{error}");
 }
 
-/// A recorder SIGKILLed mid-run does not stop the run, and leaves a file whose complete chunks a
-/// streaming reader reads: truths of consecutive ticks from 0, each at its simulated time.
+/// A recorder SIGKILLed mid-run does not stop the run, and leaves a file that reads up to the
+/// record it was writing: the first byte that does not read lies after the last complete chunk,
+/// every message of every complete chunk decodes, and the truths are of consecutive ticks from
+/// 0, each at its simulated time.
 #[test]
 fn a_killed_recorder_leaves_every_complete_chunk_readable() {
     let _serial = serial();
@@ -250,7 +388,25 @@ fn a_killed_recorder_leaves_every_complete_chunk_readable() {
     );
     assert_eq!(run.summary.expect("a summary").ticks, 3000);
 
-    let truths = truths(&killed_at);
+    let found = salvage(&killed_at);
+    assert!(
+        matches!(found.stop, Some(mcap::McapError::UnexpectedEof)),
+        "the walk stops at the cut, not at {:?} ({} bytes)",
+        found.stop,
+        killed_at.len()
+    );
+    assert!(
+        found.first_unreadable >= found.last_chunk_end,
+        "nothing reads from byte {} on ({}), yet a complete chunk ends at {} (chunks at {:?}, \
+         {} bytes)",
+        found.first_unreadable,
+        found.bad_record.as_deref().unwrap_or("the cut"),
+        found.last_chunk_end,
+        found.chunks,
+        killed_at.len()
+    );
+    assert!(found.chunks.len() > 1, "chunks at {:?}", found.chunks);
+    let truths = truths_of(&found.messages);
     assert!(
         !truths.is_empty(),
         "no complete chunk in {} bytes",
@@ -272,6 +428,51 @@ fn a_killed_recorder_leaves_every_complete_chunk_readable() {
     let output = mole_info("killed", &killed_at);
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("truncated"));
+}
+
+/// The count `name=N` in a log line (colour codes around it or not).
+fn count_in(line: &str, name: &str) -> u64 {
+    let plain: String = line
+        .split('\x1b')
+        .enumerate()
+        .map(|(i, part)| match i {
+            0 => part,
+            _ => part.split_once('m').map_or("", |(_, rest)| rest),
+        })
+        .collect();
+    plain
+        .split_whitespace()
+        .find_map(|word| word.strip_prefix(&format!("{name}=")))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no `{name}=N` in `{plain}`"))
+}
+
+/// In realtime nothing wakes the recorder: every subscription is passive, so however many
+/// messages it records, no publisher signals it once; it drains its queues on its own timer.
+#[test]
+fn the_recorder_is_never_woken_by_a_publisher_in_realtime() {
+    let _serial = serial();
+    let run = finish(start(
+        "realtime-wakes",
+        &["--mode", "realtime", "--ticks", "300"],
+        true,
+    ));
+    assert!(run.output.status.success(), "{}", run.logs);
+    let messages = stream(&run.recording.expect("a recording")).len() as u64;
+    let finished = run
+        .recorder_log
+        .lines()
+        .find(|l| l.contains("recording finished"))
+        .unwrap_or_else(|| panic!("the recorder did not finish:\n{}", run.recorder_log));
+    assert_eq!(count_in(finished, "messages"), messages, "{finished}");
+    let ticks = run.summary.expect("a summary").ticks;
+    assert!(messages > 3 * ticks, "{messages} messages in {ticks} ticks");
+    let (woken, drains) = (count_in(finished, "woken"), count_in(finished, "drains"));
+    assert_eq!(
+        woken, 0,
+        "woken {woken} times by publishers for {messages} messages ({drains} drains)"
+    );
+    assert!(drains > 0, "{finished}");
 }
 
 /// A process killed mid-run is restarted and another swapped, the recording goes on across
@@ -374,34 +575,58 @@ fn mole_record_attaches_to_a_running_stack_until_it_ends() {
     assert_eq!(ticks, (first..=last).collect::<Vec<_>>());
 }
 
-/// Bad recording settings, and `mole record` where no stack runs, are refused with exit 2
-/// before anything starts, naming what is wrong.
-#[test]
-fn bad_recording_settings_are_refused_before_anything_starts() {
+/// `mole up` with `args` in a fresh namespace, expected to refuse them: its output, and whether
+/// it started nothing (no process of its namespace, no process's log).
+fn refused_up(args: &[&str]) -> (Output, bool) {
     let namespace = unique_namespace("bad-record");
     let out = std::env::temp_dir().join(format!("mole-{namespace}"));
-    let file = out.join(RECORDING).display().to_string();
-    let output = run_mole(&[
-        "up",
-        "--record",
-        &file,
-        "--record-every",
-        "mapping/gird=3",
-        "--namespace",
-        &namespace,
-        "--out",
-        &out.display().to_string(),
-        "--quiet",
-    ]);
-    let refused = processes_of(&namespace).is_empty() && !Path::new(&file).exists();
+    let out_text = out.display().to_string();
+    let mut up = vec!["up"];
+    up.extend_from_slice(args);
+    up.extend(["--namespace", &namespace, "--out", &out_text, "--quiet"]);
+    let output = run_mole(&up);
+    let logs = std::fs::read_dir(out.join("logs")).map_or(0, |entries| entries.count());
+    let nothing = processes_of(&namespace).is_empty() && logs == 0;
+    stop_and_clean(None, &namespace);
     let _ = std::fs::remove_dir_all(&out);
+    (output, nothing)
+}
+
+/// Bad recording settings (a topic that is not one, a FILE that cannot be written: below a
+/// file, a directory, in /proc, where not even root creates files), and `mole record` where no
+/// stack runs, are refused with exit 2 before anything starts, naming what is wrong.
+#[test]
+fn bad_recording_settings_are_refused_before_anything_starts() {
+    let dir = TempDir::new("bad-record");
+    let file = dir.0.join(RECORDING).display().to_string();
+    let (output, nothing) = refused_up(&["--record", &file, "--record-every", "mapping/gird=3"]);
     let error = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{error}");
     assert!(
         error.contains("--record-every `mapping/gird=3`: `mapping/gird` is not a topic"),
         "{error}"
     );
-    assert!(refused, "nothing started, nothing written");
+    assert!(nothing, "nothing started: {error}");
+    assert!(!Path::new(&file).exists(), "nothing written");
+
+    let plain = dir.0.join("plain");
+    std::fs::write(&plain, b"a file, not a directory").expect("write a file");
+    let below_a_file = plain.join(RECORDING).display().to_string();
+    let a_directory = dir.0.display().to_string();
+    let in_proc = format!("/proc/mole-{}.mcap", std::process::id());
+    for path in [&below_a_file, &a_directory, &in_proc] {
+        let (output, nothing) =
+            refused_up(&["--mode", "lockstep", "--ticks", "50", "--record", path]);
+        let error = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "--record {path}: {error}");
+        assert!(
+            error.contains(&format!("cannot record to {path}: ")),
+            "{error}"
+        );
+        assert!(nothing, "--record {path}: something started: {error}");
+    }
+
+    let namespace = unique_namespace("bad-record");
     let output = run_mole(&["record", "--namespace", &namespace, &file]);
     let error = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{error}");

@@ -4,7 +4,8 @@
 //! ends where it is told; bad input is refused before anything starts.
 
 use mole_integration_tests::*;
-use mole_types::Role;
+use mole_types::{Role, topics};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -119,14 +120,28 @@ fn record(dir: &Path) -> (PathBuf, String) {
             &path,
         ],
     );
-    let namespace = stack.namespace.clone();
+    let (namespace, out) = (stack.namespace.clone(), stack.out.clone());
     let output = stack.wait(RUN_TIMEOUT);
+    let _ = std::fs::remove_dir_all(&out);
     assert!(
         output.status.success(),
         "recording failed: {}",
         String::from_utf8_lossy(&output.stderr)
     );
     (file, namespace)
+}
+
+/// `mole replay FILE` into `namespace` and `out`, run to its end (for input it refuses).
+fn replay_to_end(file: &Path, namespace: &str, out: &Path) -> Output {
+    run_mole(&[
+        "replay",
+        &file.display().to_string(),
+        "--namespace",
+        namespace,
+        "--quiet",
+        "--out",
+        &out.display().to_string(),
+    ])
 }
 
 fn text(output: &Output) -> String {
@@ -137,10 +152,115 @@ fn text(output: &Output) -> String {
     )
 }
 
+/// The samples of `topics` in a recording by (tick, topic), the first of each, with what two
+/// runs of the same inputs may differ in zeroed (the docs' list: the header's `seq`, `stamp_ns`
+/// and `origin_ns`, the pose's `update_ns`). Worked out here from the file, apart from the code
+/// `--check` runs.
+fn outputs(file: &Path, topics: &[&str]) -> BTreeMap<(u64, String), Vec<u8>> {
+    use mole_types::{Header, Pose};
+    let bytes = std::fs::read(file).expect("read a recording");
+    let mut samples = BTreeMap::new();
+    for message in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let message = message.expect("a finished recording");
+        let topic = message.channel.topic.as_str();
+        if !topics.contains(&topic) {
+            continue;
+        }
+        let mut data = message.data.into_owned();
+        let header: Header = bytemuck::pod_read_unaligned(&data[..size_of::<Header>()]);
+        let mut wall_clock = vec![
+            std::mem::offset_of!(Header, seq),
+            std::mem::offset_of!(Header, stamp_ns),
+            std::mem::offset_of!(Header, origin_ns),
+        ];
+        if topic == topics::LOCALIZATION_POSE.name {
+            wall_clock.push(std::mem::offset_of!(Pose, update_ns));
+        }
+        for at in wall_clock {
+            data[at..at + 8].fill(0);
+        }
+        samples
+            .entry((header.tick, topic.to_string()))
+            .or_insert(data);
+    }
+    samples
+}
+
+/// The first tick before `last` at which a sample the recording holds is missing from the
+/// replay or differs from it, with the topics that do.
+fn first_difference(
+    recorded: &BTreeMap<(u64, String), Vec<u8>>,
+    replayed: &BTreeMap<(u64, String), Vec<u8>>,
+    last: u64,
+) -> Option<(u64, Vec<String>)> {
+    let mut differing: BTreeMap<u64, Vec<String>> = BTreeMap::new();
+    for ((tick, topic), data) in recorded {
+        if *tick < last && replayed.get(&(*tick, topic.clone())) != Some(data) {
+            differing.entry(*tick).or_default().push(topic.clone());
+        }
+    }
+    differing.into_iter().next()
+}
+
+/// What `--check` compares: every output of the roles in the loop that the replay runs live.
+fn live_outputs() -> Vec<&'static str> {
+    let played = [Role::World, Role::Sensing];
+    mole_types::GRAPH
+        .iter()
+        .filter(|spec| spec.in_loop && !played.contains(&spec.role))
+        .flat_map(|spec| spec.outputs.iter().copied())
+        .collect()
+}
+
+/// A copy of the recording `from` at `to`, written with the `mcap` crate: every message, the
+/// schema names passed through `schema_name(topic, name)`, every metadata record through
+/// `metadata`.
+fn rewrite(
+    from: &Path,
+    to: &Path,
+    schema_name: impl Fn(&str, &str) -> String,
+    metadata: impl Fn(&mut mcap::records::Metadata),
+) {
+    let bytes = std::fs::read(from).expect("read the recording");
+    let file = std::fs::File::create(to).expect("create the copy");
+    let mut writer = mcap::WriteOptions::new()
+        .profile("mole")
+        .compression(Some(mcap::Compression::Lz4))
+        .create(std::io::BufWriter::new(file))
+        .expect("an MCAP writer");
+    let mut channels = BTreeMap::new();
+    for message in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let mut message = message.expect("a finished recording");
+        let channel = channels.entry(message.channel.id).or_insert_with(|| {
+            let mut channel = (*message.channel).clone();
+            if let Some(schema) = &channel.schema {
+                let mut schema = (**schema).clone();
+                schema.name = schema_name(&channel.topic, &schema.name);
+                channel.schema = Some(std::sync::Arc::new(schema));
+            }
+            std::sync::Arc::new(channel)
+        });
+        message.channel = channel.clone();
+        writer.write(&message).expect("write a message");
+    }
+    let summary = mcap::Summary::read(&bytes)
+        .expect("a summary")
+        .expect("a finished recording");
+    for index in &summary.metadata_indexes {
+        let mut record = mcap::read::metadata(&bytes, index).expect("a metadata record");
+        metadata(&mut record);
+        writer.write_metadata(&record).expect("write metadata");
+    }
+    writer.finish().expect("finish the copy");
+}
+
 /// Replayed with the world and sensing played from the file, localization, mapping and
 /// planning publish exactly what they recorded, tick by tick; with a mapping parameter changed
-/// (the touch threshold, through the environment) the check fails at the tick where mapping's
-/// output first differs, naming its topic and field; `--to` ends the run at its tick.
+/// (the touch threshold, through the environment) the check fails at the first tick where the
+/// replay's outputs differ from the recording's (found here from both files), naming a mapping
+/// topic and field; `--to` ends the run at its tick. A real recording cut short, of other
+/// message layouts, without its launch file or scenario, or replayed into a namespace in use,
+/// is refused.
 #[test]
 fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     let _serial = serial();
@@ -166,6 +286,7 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     let numb = [(mole_types::env::TOUCH_THRESHOLD, "1e9")];
     let changed = Replay::start(&dir.0, &file, &["--check"], &numb);
     namespaces.push(changed.namespace.clone());
+    let replayed = changed.out.join("replay/replayed.mcap");
     let changed = changed.wait();
     let said = text(&changed);
     assert_eq!(changed.status.code(), Some(1), "{said}");
@@ -175,6 +296,26 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
         .unwrap_or_else(|| panic!("no check failure in:\n{said}"));
     assert!(failure.contains(": mapping/"), "{failure}");
     assert!(failure.contains("differs in field `"), "{failure}");
+    // The tick it names is the first at which the replay's own recording differs.
+    let compared = live_outputs();
+    let last: u64 = TICKS.parse().expect("a tick count");
+    let (tick, differing) = first_difference(
+        &outputs(&file, &compared),
+        &outputs(&replayed, &compared),
+        last,
+    )
+    .unwrap_or_else(|| panic!("the replay differs nowhere, yet: {failure}"));
+    let named = failure
+        .strip_prefix(&format!("error: check failed: tick {tick}: "))
+        .unwrap_or_else(|| {
+            panic!("the first difference is at tick {tick} ({differing:?}): {failure}")
+        });
+    assert!(
+        differing
+            .iter()
+            .any(|topic| named.starts_with(&format!("{topic} "))),
+        "at tick {tick} {differing:?} differ: {failure}"
+    );
 
     let window = Replay::start(&dir.0, &file, &["--to", "120"], &[]);
     namespaces.push(window.namespace.clone());
@@ -187,8 +328,9 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
         assert_eq!(records_of(namespace), Vec::<String>::new(), "{namespace}");
     }
 
-    // Bad input with a real recording: cut short, or into a namespace a stack is running in;
-    // each refused with exit 2, naming what is wrong, and nothing of its own started.
+    // Bad input with a real recording: cut short, of other layouts, without its launch file or
+    // scenario, or into a namespace a stack is running in; each refused with exit 2, naming what is wrong,
+    // and nothing of its own started.
     let cut = dir.0.join("cut.mcap");
     let bytes = std::fs::read(&file).expect("read the recording");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write a truncated copy");
@@ -198,19 +340,63 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     assert!(said.contains(&cut.display().to_string()), "{said}");
     assert!(said.contains("truncated"), "{said}");
 
+    // Made from the real recording with the `mcap` crate: the truth of another layout, and the
+    // launch file or the scenario left out (`mole record`, attached to a running stack, knows
+    // neither).
+    let other_layouts = dir.0.join("other-layouts.mcap");
+    rewrite(
+        &file,
+        &other_layouts,
+        |topic, name| match topic == topics::WORLD_TRUTH.name {
+            true => name.replace(".v1", ".v0"),
+            false => name.to_string(),
+        },
+        |_| {},
+    );
+    let without = |fact: &str| {
+        let copy = dir.0.join(format!("no-{fact}.mcap"));
+        rewrite(
+            &file,
+            &copy,
+            |_, name| name.to_string(),
+            |record| {
+                record.metadata.remove(fact);
+                record.metadata.remove(&format!("{fact}_path"));
+            },
+        );
+        copy
+    };
+    let (no_launch_file, no_scenario) = (without("launch_file"), without("scenario"));
+    for (copy, why) in [
+        (
+            &other_layouts,
+            "recorded with other message layouts: `world/truth` holds `mole.Truth.v0`, this \
+             build reads `mole.Truth.v1`",
+        ),
+        (
+            &no_launch_file,
+            "the recording does not hold its launch file",
+        ),
+        (&no_scenario, "the recording does not hold its scenario"),
+    ] {
+        let namespace = unique_namespace("replay-refused");
+        let out = dir.0.join(&namespace);
+        let output = replay_to_end(copy, &namespace, &out);
+        let said = text(&output);
+        assert_eq!(output.status.code(), Some(2), "{said}");
+        assert!(
+            said.contains(&format!("{}: {why}", copy.display())),
+            "{said}"
+        );
+        assert!(!out.exists(), "nothing started, nothing written: {said}");
+        assert_eq!(records_of(&namespace), Vec::<String>::new());
+    }
+
     let busy = Stack::start("replay-busy", &["--mode", "realtime", "--ticks", "100000"]);
     busy.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     let running = processes_of(&busy.namespace);
     let out = dir.0.join("into-busy");
-    let output = run_mole(&[
-        "replay",
-        &file.display().to_string(),
-        "--namespace",
-        &busy.namespace,
-        "--quiet",
-        "--out",
-        &out.display().to_string(),
-    ]);
+    let output = replay_to_end(&file, &busy.namespace, &out);
     let said = text(&output);
     assert_eq!(output.status.code(), Some(2), "{said}");
     assert!(
@@ -222,6 +408,9 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
         running,
         "a replay process started"
     );
+    let out = busy.out.clone();
+    drop(busy);
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// A file that is not there, a file that is not a recording and a role the graph does not have

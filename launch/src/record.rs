@@ -55,8 +55,10 @@ fn recorder_program(flag: &str, every: &[String]) -> Result<PathBuf, Failure> {
     sidecar::program(RECORDER_PROGRAM)
 }
 
-/// `FILE` as an absolute path whose directory exists (created if need be); a stale file there
-/// is removed, so a file present later is this run's.
+/// `FILE` as an absolute path the recorder can write: its directory exists (created if need
+/// be) and a file can be created in it; a stale file there is removed, so a file present later
+/// is this run's. A place that cannot be written is refused (exit 2, naming it) before anything
+/// starts, not by a recorder that dies once the stack runs.
 fn prepare_file(file: &Path) -> Result<PathBuf, Failure> {
     let failed =
         |e: std::io::Error| Failure::input(format!("cannot record to {}: {e}", file.display()));
@@ -64,10 +66,16 @@ fn prepare_file(file: &Path) -> Result<PathBuf, Failure> {
     if let Some(dir) = file.parent() {
         std::fs::create_dir_all(dir).map_err(failed)?;
     }
-    match std::fs::remove_file(&file) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(failed(e)),
-        _ => Ok(file),
+    if let Err(e) = std::fs::remove_file(&file)
+        && e.kind() != std::io::ErrorKind::NotFound
+    {
+        return Err(failed(e));
     }
+    // The recorder creates the file only once it listens on every topic; whether it can is
+    // known now.
+    std::fs::File::create(&file).map_err(failed)?;
+    std::fs::remove_file(&file).map_err(failed)?;
+    Ok(file)
 }
 
 /// What `mole up --record FILE` records with, checked before anything starts.

@@ -96,9 +96,13 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut next_drain = Instant::now();
     let mut next_flush = Instant::now() + FLUSH_EVERY;
     let mut writing = true;
+    // Wake-ups by a publisher (the truth in lockstep; none in realtime) and drains, for the log.
+    let (mut woken, mut drains) = (0u64, 0u64);
     while writing {
         let wake = waitset.wait(&mut ctx, Some(next_drain.min(next_flush)))?;
+        woken += u64::from(wake == Wake::Data);
         if lockstep || Instant::now() >= next_drain {
+            drains += 1;
             taps.drain();
             writing = send(&records, &mut taps.seen.out);
             next_drain = Instant::now() + REALTIME_DRAIN;
@@ -127,6 +131,8 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         file = %args.file.display(),
         messages = written.messages,
         megabytes = written.bytes as f64 / 1e6,
+        woken,
+        drains,
         "recording finished"
     );
     Ok(())
