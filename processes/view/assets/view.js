@@ -282,6 +282,12 @@
   }
 
   function describe(e) {
+    if (e.kind === "fault") {
+      const how = e.fault === "delay" ? ` by ${e.delay_ms} ms`
+        : e.fault === "drop" || e.fault === "corrupt" ? ` ${e.fraction} of the samples` : "";
+      const long = e.duration_s > 0 ? ` for ${e.duration_s} s` : "";
+      return `tick ${e.tick}: fault ${e.id}: ${e.fault} ${e.target}${how}${long}`;
+    }
     const who = e.role || e.topic || "";
     const pids = e.old_pid ? ` (pid ${e.old_pid} → ${e.pid})` : e.pid ? ` (pid ${e.pid})` : "";
     const count = e.count ? ` ${e.count} samples` : "";

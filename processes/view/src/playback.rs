@@ -14,8 +14,8 @@ use crate::input::{MAX_SPEED, MIN_SPEED, TimelineOp};
 use crate::scene::{Frame, LATENCY_WINDOW_S, Scene, TRUTHS_KEPT};
 use mole_recorder::tape::{Sample, TapeError, Window, for_each_sample, read_tape};
 use mole_types::{
-    ClockMode, Grid, Landmarks, Message, Particles, PlanStatus, Pose, Processes, Scan, Stats,
-    Truth, WorldMap, topics,
+    ClockMode, Fault, Grid, Landmarks, Message, Particles, PlanStatus, Pose, Processes, Scan,
+    Stats, Truth, WorldMap, topics,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -204,7 +204,7 @@ pub enum ReelError {
 }
 
 /// Every topic the view shows, as recorded.
-pub const SHOWN: [&str; 11] = [
+pub const SHOWN: [&str; 12] = [
     topics::WORLD_MAP.name,
     topics::WORLD_TRUTH.name,
     topics::LOCALIZATION_POSE.name,
@@ -216,6 +216,7 @@ pub const SHOWN: [&str; 11] = [
     topics::MAPPING_CONTACT.name,
     topics::STACK_STATS.name,
     topics::STACK_PROCESSES.name,
+    topics::STACK_FAULTS.name,
 ];
 
 /// A recording's shown topics in memory, each indexed by the world tick it was recorded at
@@ -237,6 +238,7 @@ pub struct Reel {
     contact: Track,
     stats: Track,
     processes: Track,
+    faults: Track,
 }
 
 impl Reel {
@@ -300,6 +302,7 @@ impl Reel {
             contact: Track::default(),
             stats: Track::default(),
             processes: Track::default(),
+            faults: Track::default(),
         }
     }
 
@@ -330,6 +333,7 @@ impl Reel {
             t if t == topics::STACK_PROCESSES.name => {
                 (&mut self.processes, |d| valid::<Processes>(d))
             }
+            t if t == topics::STACK_FAULTS.name => (&mut self.faults, |d| valid::<Fault>(d)),
             _ => return Ok(()),
         };
         check(data)?;
@@ -403,8 +407,25 @@ impl Reel {
         for (_, stats) in self.stats.within(from, to) {
             scene.on_stats(&decoded(stats));
         }
-        for (tick, processes) in self.processes.within(from, to) {
-            scene.on_processes_at(&decoded(processes), tick);
+        // Process tables and faults in the order they were recorded, as their events came.
+        let mut processes = self.processes.within(from, to).peekable();
+        let mut faults = self.faults.within(from, to).peekable();
+        loop {
+            match (processes.peek(), faults.peek()) {
+                (Some(&(p, _)), Some(&(f, _))) if f < p => {
+                    let (tick, fault) = faults.next().expect("peeked");
+                    scene.on_fault_at(&decoded(fault), tick);
+                }
+                (Some(_), _) => {
+                    let (tick, report) = processes.next().expect("peeked");
+                    scene.on_processes_at(&decoded(report), tick);
+                }
+                (None, Some(_)) => {
+                    let (tick, fault) = faults.next().expect("peeked");
+                    scene.on_fault_at(&decoded(fault), tick);
+                }
+                (None, None) => break,
+            }
         }
     }
 }
@@ -467,7 +488,8 @@ mod tests {
     use super::*;
     use crate::Client;
     use crate::tests::{grid, map, truth, zeroed};
-    use mole_types::{GRID_FRONTIER, PROCESS_RUNNING, write_name};
+    use mole_types::{FaultKind, FaultSpec, GRID_FRONTIER, PROCESS_RUNNING, write_name};
+    use serde_json::Value;
 
     const PERIOD_NS: u64 = 10_000_000;
 
@@ -525,6 +547,17 @@ mod tests {
             reel.add(&sample(topics::STACK_PROCESSES.name, at, &*report))
                 .expect("processes");
         }
+        let mut fault: Box<Fault> = zeroed();
+        let kill = FaultSpec {
+            kind: FaultKind::Kill,
+            target: "planning".into(),
+            duration_s: 0.0,
+            delay_ms: 0.0,
+            fraction: 0.0,
+        };
+        kill.to_message(&mut fault, 1, 0, 0);
+        reel.add(&sample(topics::STACK_FAULTS.name, 350, &*fault))
+            .expect("a fault");
         reel
     }
 
@@ -640,15 +673,18 @@ mod tests {
             Some((500, 1))
         );
         assert_eq!(s.latency.map(|l| l.samples), Some(201), "the 2 s window");
-        assert_eq!(s.events_total, 2);
+        let events: Vec<(&Value, &Value)> =
+            s.events.iter().map(|e| (&e["kind"], &e["tick"])).collect();
+        assert_eq!(s.events_total, 3);
         assert_eq!(
-            (&s.events[0]["kind"], &s.events[0]["tick"]),
-            (&"started".into(), &250.into())
+            events,
+            [
+                (&"started".into(), &250.into()),
+                (&"fault".into(), &350.into()),
+                (&"restarted".into(), &450.into())
+            ]
         );
-        assert_eq!(
-            (&s.events[1]["kind"], &s.events[1]["tick"]),
-            (&"restarted".into(), &450.into())
-        );
+        assert_eq!(s.events[1]["target"], "planning");
         assert_eq!(
             s.timeline.map(|t| (t.first_tick, t.tick, t.last_tick)),
             Some((0, 500, 600))

@@ -4,7 +4,7 @@
 use crate::playback::Timeline;
 use mole_recorder::{Event, ProcessWatch};
 use mole_types::{
-    DIRECTION_PUBLISH, GRID_CONTACT, GRID_FRONTIER, Grid, LANDMARK_ANONYMOUS, Landmarks,
+    DIRECTION_PUBLISH, Fault, GRID_CONTACT, GRID_FRONTIER, Grid, LANDMARK_ANONYMOUS, Landmarks,
     MODE_ARRIVED, MODE_BOUNCE_BACK, MODE_DONE, MODE_ESCAPE, MODE_EXPLORE, MODE_GOAL, MODE_IDLE,
     MODE_STALLED, Particles, PlanStatus, Pose, Processes, STATUS_HAS_FRONTIER, STATUS_HAS_GOAL,
     Scan, Stats, TRUTH_IN_CONTACT, Truth, WorldMap, read_name,
@@ -491,6 +491,16 @@ impl Scene {
         for event in self.watch.update(report) {
             self.event(&event, tick);
         }
+    }
+
+    /// stack/faults: a fault `mole fault` injected, at the newest world tick.
+    pub fn on_fault(&mut self, fault: &Fault) {
+        self.on_fault_at(fault, self.tick());
+    }
+
+    /// stack/faults read at world tick `tick` (a recording's).
+    pub fn on_fault_at(&mut self, fault: &Fault, tick: u64) {
+        self.event(&Event::of_fault(fault), tick);
     }
 
     fn event(&mut self, event: &Event, tick: u64) {

@@ -9,8 +9,8 @@
 
 use mole_runtime::{ClockMode, Context, RuntimeError, Subscriber, Waker};
 use mole_types::{
-    Grid, Landmarks, Message, Particles, PlanStatus, Pose, Processes, Scan, Stats, Truth, WorldMap,
-    topics,
+    Fault, Grid, Landmarks, Message, Particles, PlanStatus, Pose, Processes, Scan, Stats, Truth,
+    WorldMap, topics,
 };
 use mole_view::Scene;
 
@@ -27,6 +27,7 @@ pub struct Taps {
     contact: Subscriber<Grid>,
     stats: Subscriber<Stats>,
     processes: Subscriber<Processes>,
+    faults: Subscriber<Fault>,
 }
 
 /// Drains `subscriber`; the newest sample, if a new one came, goes to `on_newest`.
@@ -58,6 +59,7 @@ impl Taps {
             contact: ctx.passive_subscriber(topics::MAPPING_CONTACT)?,
             stats: ctx.passive_subscriber(topics::STACK_STATS)?,
             processes: ctx.passive_subscriber(topics::STACK_PROCESSES)?,
+            faults: ctx.passive_subscriber(topics::STACK_FAULTS)?,
         })
     }
 
@@ -92,6 +94,7 @@ impl Taps {
         newest(&mut self.contact, |g| scene.on_grid(g));
         self.stats.drain(|s| scene.on_stats(s));
         self.processes.drain(|p| scene.on_processes(p));
+        self.faults.drain(|f| scene.on_fault(f));
     }
 
     /// Reads every queue but the map's and forgets the samples.
@@ -106,5 +109,6 @@ impl Taps {
         self.contact.drain(|_| {});
         self.stats.drain(|_| {});
         self.processes.drain(|_| {});
+        self.faults.drain(|_| {});
     }
 }
