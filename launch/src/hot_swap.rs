@@ -33,6 +33,8 @@ pub struct SwapReport {
     pub gap: Duration,
     /// Median interval on `topic` during the swap (the normal rhythm, for comparison).
     pub period: Duration,
+    /// Longest run of world ticks `topic` skipped during the swap: the gap as a count.
+    pub gap_ticks: u64,
     /// Ticks seen on `topic` during the swap (each counted once, though both processes answer
     /// during the overlap): what `steps_lost` and `steps_repeated` are counted over.
     pub ticks_observed: u64,
@@ -275,6 +277,7 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
 
     let (gap, period) = gap_and_period(&mut seen.output.stamps);
     let ticks_observed = distinct(&seen.output.ticks);
+    let gap_ticks = longest_skip(&seen.output.ticks);
     let (steps_lost, steps_repeated) = if env.mode == ClockMode::Lockstep {
         (steps_lost(&seen), steps_repeated(&seen))
     } else {
@@ -287,6 +290,7 @@ pub fn hot_swap(env: SwapEnv<'_>, spec: ChildSpec) -> Result<SwapReport, SwapErr
         topic,
         gap,
         period,
+        gap_ticks,
         ticks_observed,
         steps_lost,
         steps_repeated,
@@ -308,6 +312,18 @@ fn gap_and_period(stamps: &mut [u64]) -> (Duration, Duration) {
     let longest = intervals[intervals.len() - 1];
     let median = intervals[intervals.len() / 2];
     (Duration::from_nanos(longest), Duration::from_nanos(median))
+}
+
+/// The most ticks skipped between two consecutive distinct ticks of `ticks` (0 for none).
+fn longest_skip(ticks: &[u64]) -> u64 {
+    let mut sorted = ticks.to_vec();
+    sorted.sort_unstable();
+    sorted.dedup();
+    sorted
+        .windows(2)
+        .map(|w| w[1] - w[0] - 1)
+        .max()
+        .unwrap_or(0)
 }
 
 /// Lockstep: world steps skipped on world/truth, and ticks missing between the first and last
@@ -360,6 +376,13 @@ mod tests {
         assert_eq!(gap, Duration::from_nanos(45));
         assert_eq!(period, Duration::from_nanos(10));
         assert_eq!(gap_and_period(&mut []), (Duration::ZERO, Duration::ZERO));
+    }
+
+    #[test]
+    fn the_gap_in_ticks_is_the_longest_skip_whatever_the_order() {
+        assert_eq!(longest_skip(&[3, 4, 4, 9, 5, 10]), 3);
+        assert_eq!(longest_skip(&[1, 2, 3]), 0);
+        assert_eq!(longest_skip(&[]), 0);
     }
 
     /// What the watchers of a swap saw, by tick (the stamps do not matter here).

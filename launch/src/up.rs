@@ -864,6 +864,7 @@ fn swap_record(report: &SwapReport) -> SwapRecord {
         tick: report.tick,
         topic: report.topic.to_owned(),
         gap_ms: report.gap.as_secs_f64() * 1e3,
+        gap_ticks: report.gap_ticks,
         median_interval_ms: report.period.as_secs_f64() * 1e3,
         ticks_observed: report.ticks_observed,
         steps_lost: report.steps_lost,

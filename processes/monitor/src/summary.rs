@@ -142,6 +142,9 @@ pub struct SwapRecord {
     pub gap_ms: f64,
     /// Median interval on `topic` during the swap (its normal rhythm).
     pub median_interval_ms: f64,
+    /// Longest run of world ticks `topic` skipped during the swap.
+    #[serde(default)]
+    pub gap_ticks: u64,
     /// Distinct ticks seen on `topic` during the swap.
     pub ticks_observed: u64,
     /// Lockstep: steps missing from the truth or from `topic`.
