@@ -13,91 +13,6 @@ use std::time::{Duration, Instant};
 /// a process silent for 5 s (`HANG_TIMEOUT`); a pause must outlast both.
 const LONG_PAUSE: Duration = Duration::from_secs(17);
 
-/// An operator in the stack: it publishes goals and paces, and keeps reading the truth and the
-/// planner's status (in lockstep a subscriber's full queue holds its publisher back, so every
-/// wait of the test reads them).
-struct Operator {
-    goal: Publisher<Goal>,
-    pace: Publisher<Pace>,
-    truth: Subscriber<Truth>,
-    status: Subscriber<PlanStatus>,
-    /// Declared last: the ports above go before the node they live on.
-    _ctx: Context,
-}
-
-impl Operator {
-    /// Joins the stack of `stack`, of clock `mode`, once its world is ready.
-    fn join(stack: &Stack, mode: ClockMode) -> Operator {
-        stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
-        let ctx = join_stack(&stack.namespace, "operator", mode);
-        Operator {
-            goal: ctx.publisher(topics::OPERATOR_GOAL).unwrap(),
-            pace: ctx.publisher(topics::OPERATOR_PACE).unwrap(),
-            truth: ctx.subscriber(topics::WORLD_TRUTH).unwrap(),
-            status: ctx.subscriber(topics::PLANNING_STATUS).unwrap(),
-            _ctx: ctx,
-        }
-    }
-
-    /// Reads whatever came on the truth and the status.
-    fn read(&mut self) {
-        self.truth.drain(|_| {});
-        self.status.drain(|_| {});
-    }
-
-    /// Keeps reading for `how_long`.
-    fn follow(&mut self, how_long: Duration) {
-        let until = Instant::now() + how_long;
-        while Instant::now() < until {
-            self.read();
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
-
-    /// Keeps reading until `done` holds; `timeout` only guards against waiting forever.
-    fn follow_until(&mut self, what: &str, timeout: Duration, done: impl Fn(&Operator) -> bool) {
-        let until = Instant::now() + timeout;
-        loop {
-            self.read();
-            if done(self) {
-                return;
-            }
-            assert!(
-                Instant::now() < until,
-                "{what}: not within {timeout:?}; truth {:?}",
-                self.truth.latest()
-            );
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
-
-    /// The newest true state.
-    fn truth(&self) -> &Truth {
-        self.truth.latest().expect("a truth has come")
-    }
-
-    /// The newest truth's step.
-    fn tick(&self) -> u64 {
-        self.truth.tick().unwrap_or(0)
-    }
-
-    /// Publishes a goal, stamped with the newest step seen.
-    fn send_goal(&mut self, x: f64, y: f64, tolerance: f64) {
-        let tick = self.tick();
-        self.goal
-            .publish(tick, 0, |g| (g.x, g.y, g.tolerance) = (x, y, tolerance))
-            .unwrap();
-    }
-
-    /// Publishes a pace, stamped with the newest step seen.
-    fn send_pace(&mut self, op: u32, steps: u32) {
-        let tick = self.tick();
-        self.pace
-            .publish(tick, 0, |p| (p.op, p.steps) = (op, steps))
-            .unwrap();
-    }
-}
-
 /// Every log line of a kept run that says a lockstep step waited for its inputs, or that a
 /// process hung.
 fn held_step_reports(keep: &std::path::Path) -> Vec<String> {
@@ -111,20 +26,6 @@ fn held_step_reports(keep: &std::path::Path) -> Vec<String> {
         );
     }
     lines
-}
-
-/// A log's text without its terminal colour codes (`ESC [ … m`).
-fn without_colours(text: &str) -> String {
-    let mut plain = String::with_capacity(text.len());
-    let mut chars = text.chars();
-    while let Some(c) = chars.next() {
-        if c == '\u{1b}' {
-            chars.by_ref().find(|c| *c == 'm');
-        } else {
-            plain.push(c);
-        }
-    }
-    plain
 }
 
 /// A goal published on operator/goal mid-run takes the DWA away from the scenario's goal: the

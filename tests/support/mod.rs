@@ -2,6 +2,9 @@
 //! is killed with all its children whatever happens, and a check that nothing is left behind.
 
 pub use mole_monitor::Summary;
+pub mod operator;
+pub use operator::Operator;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::{Mutex, MutexGuard};
