@@ -378,6 +378,13 @@ impl Drop for Worker {
     }
 }
 
+/// How long `f` took.
+fn timed(f: impl FnOnce()) -> std::time::Duration {
+    let start = std::time::Instant::now();
+    f();
+    start.elapsed()
+}
+
 /// A lockstep publisher stops waiting for a full queue after STUCK_CONSUMER or a shutdown,
 /// and the test leaves no node or service of its namespace behind.
 #[test]
@@ -402,12 +409,12 @@ fn a_lockstep_publisher_gives_up_on_a_subscriber_that_reads_nothing() {
                 // The queue is full and nobody reads it: the next sample waits
                 // STUCK_CONSUMER, then is dropped for this subscriber; after a shutdown
                 // request it does not wait at all.
-                publish_cmds(&mut cmd_pub, &[buffer]);
+                let waited = timed(|| publish_cmds(&mut cmd_pub, &[buffer]));
                 producer.request_shutdown();
-                publish_cmds(&mut cmd_pub, &[buffer + 1]);
+                let after_shutdown = timed(|| publish_cmds(&mut cmd_pub, &[buffer + 1]));
                 let mut received = Vec::new();
                 cmd_sub.drain(|c| received.push(c.header.tick));
-                received
+                (received, waited, after_shutdown)
             };
             // Every port and node is gone before the test learns the result.
             let _ = done.send(received);
@@ -417,11 +424,22 @@ fn a_lockstep_publisher_gives_up_on_a_subscriber_that_reads_nothing() {
         shutdown,
         thread: Some(thread),
     };
-    let received = finished
+    let (received, waited, after_shutdown) = finished
         .recv_timeout(mole_runtime::STUCK_CONSUMER * 5)
         .expect("the publisher gave up on the full queue");
     drop(worker);
     let buffer = topics::PLANNING_CMD.buffer as u64;
     assert_eq!(received, (0..buffer).collect::<Vec<_>>());
+    // The bound, not a timing target: the stuck sample waited it out, the one after the
+    // shutdown request did not wait for it.
+    let bound = mole_runtime::STUCK_CONSUMER;
+    assert!(
+        waited >= bound,
+        "gave up after {waited:?}, before {bound:?}"
+    );
+    assert!(
+        after_shutdown < bound,
+        "waited {after_shutdown:?} after shutdown"
+    );
     assert_eq!(leftovers(&args.namespace), Vec::<String>::new());
 }
