@@ -164,3 +164,59 @@ fn a_killed_mapping_resumes_its_grids() {
     let killed = assert_resumed_as_unkilled(Role::Mapping, &grids, &[]);
     assert_eq!(killed.grid_hash, unkilled().grid_hash);
 }
+
+/// A restart whose resume file is not one valid message refuses it: the restarted process
+/// exits 2 naming the file, the launcher does not try again and ends the run with exit 2, and
+/// the resume directory is removed. (The file is spoiled by a wrapper in localization's place,
+/// between the launcher writing it and the restart reading it.)
+#[test]
+fn a_bad_resume_file_is_refused_never_retried_and_removed() {
+    let _serial = serial();
+    let scripts = TempDir::new("bad-resume");
+    let real = bin_dir().join(Role::Localization.spec().program);
+    let file = mole_runtime::resume_file(std::path::Path::new(""), topics::LOCALIZATION_POSE.name);
+    let wrapper = scripts.0.join("spoil-resume.sh");
+    std::fs::write(
+        &wrapper,
+        format!(
+            "#!/bin/sh\n[ -n \"$MOLE_RESUME\" ] && printf 'not a pose' > \"$MOLE_RESUME/{}\"\nexec {} \"$@\"\n",
+            file.display(),
+            real.display()
+        ),
+    )
+    .expect("write the wrapper");
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&wrapper, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    let swap = format!("localization={}", wrapper.display());
+    let mut args = ARGS.to_vec();
+    args.extend(["--swap", &swap]);
+    let stack = Stack::start("bad-resume", &args);
+    stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
+    std::thread::sleep(KILL_AFTER);
+    let program = Role::Localization.spec().program;
+    let pid = pid_of(&stack.namespace, program).expect("localization runs");
+    signal(pid, nix::sys::signal::Signal::SIGKILL);
+    let resume_dir = stack.out.join("resume");
+    let keep = stack.out.with_extension("kept");
+    let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
+    let log = std::fs::read_to_string(keep.join("logs/localization.log")).unwrap_or_default();
+    let summary = summary(&keep);
+    let _ = std::fs::remove_dir_all(&keep);
+    let stderr = without_colours(&String::from_utf8_lossy(&output.stderr));
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("`localization` refused its input")
+            && stderr.contains(&*file.to_string_lossy()),
+        "{stderr}"
+    );
+    assert!(
+        without_colours(&log).contains("10 bytes, expected one"),
+        "{log}"
+    );
+    assert_eq!(
+        summary.restarts.get(Role::Localization.name()),
+        Some(&1),
+        "{summary:#?}"
+    );
+    assert!(!resume_dir.exists(), "{} is left", resume_dir.display());
+}

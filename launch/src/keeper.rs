@@ -117,3 +117,54 @@ impl Keeper {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mole_runtime::{ClockMode, read_resume_file};
+    use mole_types::topics::LOCALIZATION_POSE;
+    use mole_types::{EstimatorKind, Role};
+
+    /// Before a restart the keeper writes the role's last output and points the restart at it;
+    /// a role that resumes from nothing gets no directory; stopping removes what was written.
+    #[test]
+    fn a_restart_gets_the_last_output_kept_and_the_directory_goes_at_the_end() {
+        let namespace = format!("keeper-test-{}", std::process::id());
+        let common = CommonArgs {
+            namespace,
+            mode: ClockMode::Realtime,
+            rate_hz: 100.0,
+            seed: None,
+            takeover: false,
+            resume: None,
+        };
+        let dir = std::env::temp_dir().join(format!("mole-keeper-test-{}", std::process::id()));
+        let keeper = Keeper::start(&common, dir.clone()).expect("a keeper");
+        let flag = Arc::new(AtomicBool::new(false));
+        let estimator = Context::with_shutdown_flag("localization", &common, flag).expect("ctx");
+        let mut pose = estimator.publisher(LOCALIZATION_POSE).expect("a publisher");
+        for tick in 1..=3 {
+            pose.publish(tick, 0, |p| {
+                (p.x, p.y) = (tick as f64, 2.0);
+                p.estimator = EstimatorKind::Ekf.code();
+            })
+            .expect("published");
+        }
+        let localization = Role::Localization.name();
+        let env = keeper.before_restart(localization, 1);
+        assert_eq!(env.len(), 1, "{env:?}");
+        assert_eq!(env[0].0, env::RESUME);
+        let resumed = PathBuf::from(&env[0].1);
+        let kept = read_resume_file(&resumed, LOCALIZATION_POSE)
+            .expect("valid")
+            .expect("kept");
+        assert_eq!((kept.header.tick, kept.x), (3, 3.0), "the newest sample");
+        assert!(
+            keeper.before_restart(Role::Sensing.name(), 1).is_empty(),
+            "sensing resumes from nothing"
+        );
+        drop((pose, estimator));
+        keeper.stop();
+        assert!(!dir.exists(), "{} is left", dir.display());
+    }
+}

@@ -216,3 +216,60 @@ impl Keeper {
         Ok(written)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mole_types::Pose;
+
+    fn dir(test: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("mole-keep-{test}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("a directory");
+        dir
+    }
+
+    /// What is written is read back as it was; a topic with no file is nothing to resume.
+    #[test]
+    fn a_written_sample_reads_back_and_a_missing_one_is_none() {
+        let dir = dir("roundtrip");
+        let mut pose: Box<Pose> = bytemuck::zeroed_box();
+        (pose.header.tick, pose.x, pose.y) = (41, 1.5, -2.0);
+        pose.estimator = mole_types::EstimatorKind::Ekf.code();
+        write_resume_file(&dir, topics::LOCALIZATION_POSE.name, &*pose).expect("written");
+        let read = read_resume_file(&dir, topics::LOCALIZATION_POSE).expect("valid");
+        assert_eq!(read.as_deref(), Some(&*pose));
+        assert!(
+            !dir.join("localization.pose.partial").exists(),
+            "written atomically"
+        );
+        let missing = read_resume_file(&dir, topics::WORLD_TRUTH).expect("no error");
+        assert!(missing.is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A file of the wrong size or with invalid values is an error naming the file and what
+    /// was wrong (the process exits 2 on it), never a sample.
+    #[test]
+    fn a_file_of_the_wrong_size_or_with_invalid_values_is_refused_naming_it() {
+        let dir = dir("bad");
+        let path = resume_file(&dir, topics::LOCALIZATION_POSE.name);
+        std::fs::write(&path, b"not a pose").expect("written");
+        let short = read_resume_file(&dir, topics::LOCALIZATION_POSE).expect_err("refused");
+        let RuntimeError::Resume(named, why) = &short else {
+            panic!("{short:?}")
+        };
+        assert_eq!(named, &path);
+        assert!(why.starts_with("10 bytes, expected one"), "{why}");
+        let mut pose: Box<Pose> = bytemuck::zeroed_box();
+        pose.estimator = mole_types::EstimatorKind::Ekf.code();
+        pose.x = f64::NAN;
+        write_resume_file(&dir, topics::LOCALIZATION_POSE.name, &*pose).expect("written");
+        let invalid = read_resume_file(&dir, topics::LOCALIZATION_POSE).expect_err("refused");
+        assert!(
+            matches!(&invalid, RuntimeError::Resume(p, why) if p == &path && why.starts_with("not a valid message")),
+            "{invalid:?}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
