@@ -178,13 +178,23 @@ fn lockstep_delays_and_corruptions_change_nothing_but_the_invalid_counts() {
 }
 
 /// In realtime a drop loses samples, which their readers count from the sequence gaps; a
-/// corruption is refused by every reader; a kill is a restart like any crash.
+/// corruption is refused by every reader; a kill is a restart like any crash; each fault is an
+/// event of the run's recording.
 #[test]
 fn realtime_drops_corruptions_and_kills_are_counted() {
     let _serial = serial();
+    let recording = TempDir::new("fault-recording");
+    let file = recording.0.join("faults.mcap");
     let stack = Stack::start(
         "fault-realtime",
-        &["--mode", "realtime", "--ticks", "100000"],
+        &[
+            "--mode",
+            "realtime",
+            "--ticks",
+            "100000",
+            "--record",
+            &file.to_string_lossy(),
+        ],
     );
     stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(500));
@@ -223,6 +233,26 @@ fn realtime_drops_corruptions_and_kills_are_counted() {
     );
     assert_eq!(run.summary.restarts.get(Role::Planning.name()), Some(&1));
     assert_eq!(run.summary.faults.len(), 3, "{:#?}", run.summary.faults);
+    // Each fault is an event of the recording, with its number, kind and target.
+    let bytes = std::fs::read(&file).expect("a recording");
+    let events: Vec<(u64, String, String)> = mcap::MessageStream::new(&bytes)
+        .expect("an MCAP file")
+        .map(|m| m.expect("a finished recording reads to its end"))
+        .filter(|m| m.channel.topic == "stack/events")
+        .map(|m| serde_json::from_slice::<serde_json::Value>(&m.data).expect("JSON"))
+        .filter(|e| e["kind"] == "fault")
+        .map(|e| {
+            let text = |key: &str| e[key].as_str().unwrap_or_default().to_string();
+            (e["id"].as_u64().unwrap_or(0), text("fault"), text("target"))
+        })
+        .collect();
+    let expected = [
+        (1, "drop", "sensing/odom"),
+        (2, "corrupt", "sensing/scan"),
+        (3, "kill", "planning"),
+    ]
+    .map(|(id, kind, target)| (id, kind.to_string(), target.to_string()));
+    assert_eq!(events, expected);
 }
 
 /// A stopped process goes on where it was (the same pid, no restart) when its stop ends; one

@@ -5,15 +5,17 @@
 
 use crate::up::Failure;
 use clap::{Args, Subcommand};
-use mole_runtime::{ControlClient, stack_clock_mode};
+use mole_runtime::{CommonArgs, Context, ControlClient, stack_clock_mode};
 use mole_types::fault::faultable_topics;
 use mole_types::{
     CONTROL_FAULT, CONTROL_OK, CONTROL_REFUSED, ClockMode, ControlRequest, FaultKind, FaultSpec,
-    Role, read_name,
+    PROCESS_RUNNING, Role, read_name, topics,
 };
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 #[derive(Debug, Clone, Args)]
@@ -89,6 +91,8 @@ pub struct ChaosArgs {
     pub json: Option<std::path::PathBuf>,
 }
 
+/// The node a chaos session watches the stack's process table on.
+const CHAOS_NODE: &str = "fault";
 /// How long one fault request may wait for the launcher's answer.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -143,6 +147,61 @@ fn running_mode(namespace: &str) -> Result<ClockMode, Failure> {
 
 fn connect(namespace: &str) -> Result<ControlClient, Failure> {
     ControlClient::connect(namespace).map_err(|e| Failure::input(e.to_string()))
+}
+
+/// How long a chaos session waits, after its last fault, for every role to run again.
+const RECOVERY_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// Whether the stack is whole again after a chaos session.
+enum Whole {
+    /// Every role runs, this long after the wait began.
+    Yes(Duration),
+    /// The stack is gone.
+    Ended,
+    /// These roles still do not run after [`RECOVERY_TIMEOUT`].
+    No(String),
+}
+
+/// Waits until the launcher's process table (`stack/processes`, once a second) shows every role
+/// running, in two tables published after the wait began (the first may predate a restart).
+fn wait_until_whole(namespace: &str, mode: ClockMode) -> Result<Whole, Failure> {
+    let common = CommonArgs {
+        namespace: namespace.to_string(),
+        mode,
+        rate_hz: 100.0,
+        seed: None,
+        takeover: false,
+        resume: None,
+    };
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let attach = |e: mole_runtime::RuntimeError| Failure::run(format!("chaos: {e}"));
+    let mut ctx = Context::with_shutdown_flag(CHAOS_NODE, &common, shutdown).map_err(attach)?;
+    ctx.silence_stats();
+    let mut tables = ctx
+        .passive_subscriber(topics::STACK_PROCESSES)
+        .map_err(attach)?;
+    let start = Instant::now();
+    let (mut fresh, mut missing) = (0, String::from("the process table"));
+    while start.elapsed() < RECOVERY_TIMEOUT {
+        if stack_clock_mode(namespace).is_none() {
+            return Ok(Whole::Ended);
+        }
+        tables.drain(|table| {
+            fresh += 1;
+            let down: Vec<String> = table
+                .processes()
+                .iter()
+                .filter(|p| p.state != PROCESS_RUNNING)
+                .map(|p| read_name(&p.role).into_owned())
+                .collect();
+            missing = down.join(", ");
+        });
+        if fresh >= 2 && missing.is_empty() {
+            return Ok(Whole::Yes(start.elapsed()));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(Whole::No(missing))
 }
 
 /// One fault request; the launcher's sentence, or its refusal as bad input.
@@ -287,6 +346,28 @@ fn run_chaos(namespace: &str, args: &ChaosArgs) -> Result<(), Failure> {
     }
     if !ended_early {
         std::thread::sleep(Duration::from_secs_f64(args.duration).saturating_sub(start.elapsed()));
+        // A session is over when its last fault is and the stack is whole again.
+        let faults_over = plan
+            .iter()
+            .map(|(at, spec)| at + spec.duration_s)
+            .fold(args.duration, f64::max);
+        std::thread::sleep(Duration::from_secs_f64(faults_over).saturating_sub(start.elapsed()));
+        match wait_until_whole(namespace, mode)? {
+            Whole::Yes(after) => println!(
+                "{:7.2} s  every role runs again ({:.1} s after the last fault was over)",
+                start.elapsed().as_secs_f64(),
+                after.as_secs_f64()
+            ),
+            Whole::Ended => println!(
+                "the stack ended after {:.1} s",
+                start.elapsed().as_secs_f64()
+            ),
+            Whole::No(missing) => {
+                return Err(Failure::run(format!(
+                    "chaos: {RECOVERY_TIMEOUT:?} after the last fault, {missing} still not running"
+                )));
+            }
+        }
     }
     println!(
         "\nfaults (seed {}, {mode}):\n| kind | injected | refused |\n| --- | ---: | ---: |",
