@@ -9,24 +9,27 @@
 //! independent: a robot reads the newest map its peer offers and never waits for it.
 
 use mole_integration_tests::*;
-use mole_monitor::SlamSummary;
+use mole_monitor::{SlamSummary, mean_nees_interval};
 use mole_types::{EndReason, EstimatorKind, PlannerKind};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// Steps allowed: frontier exploration finishes the ring in about 5,100 (seed 1).
 const TICKS: &str = "6000";
-/// Highest landmark RMSE accepted (m): the bound tests/slam.rs holds EKF-SLAM alone to.
-const RMSE_BOUND: f64 = 0.10;
-/// Highest mean landmark NEES accepted: the 97.5% quantile of χ²(2), 7.38. The landmark errors
-/// of one run are not independent (every landmark carries the robot's drift), so the mean NEES
-/// of n landmarks spreads between χ²(2n)/n (independent errors, the interval the summary
-/// reports) and χ²(2) (one error shared by all); this is the wide end.
-const NEES_BOUND: f64 = 7.38;
 /// Steps between two fusions: 1 s at 100 Hz, the default.
 const FUSE_EVERY: &str = "100";
-/// Robot A's and robot B's seeds: the same ring and start, independent noise.
-const SEEDS: [&str; 2] = ["1", "2"];
+/// Robot A's and robot B's seeds, one pair per sample: the same ring and start, independent
+/// noise.
+const SEED_PAIRS: [[&str; 2]; 8] = [
+    ["1", "2"],
+    ["3", "4"],
+    ["5", "6"],
+    ["7", "8"],
+    ["9", "10"],
+    ["11", "12"],
+    ["13", "14"],
+    ["15", "16"],
+];
 
 /// One robot's run: its summary and what its localization logged.
 struct Run {
@@ -160,86 +163,107 @@ fn finish(stack: Stack) -> Run {
     run
 }
 
-/// Robots A and B alone, then together, each fusing the other's map every second by CI. One
-/// stack run is one sample: after the first fusion a robot's estimate, and so its planner's
-/// map and its path, differ from its run alone, and EKF-SLAM alone on this ring spreads widely
-/// from seed to seed (seeds 1 and 3–8: landmark RMSE 0.007–0.055 m, mean NEES 0.54–3.94, seed 4
-/// above the 2.88 the summary reports). So the claims in expectation, fused error below either
-/// robot's alone and NEES no higher than EKF-SLAM's own, are tested over 50 seeded runs in
-/// processes/localization/tests/slam_two_robots.rs; this test proves that the stack does it and
-/// that nothing breaks on the way:
+/// Robots A and B alone, then together, fusing each other's map every second by CI. One
+/// stack run is one sample: after the first fusion a robot's estimate, and so its planner's map
+/// and its path, differ from its run alone, and EKF-SLAM alone on this ring spreads widely from
+/// seed to seed. So each robot is scored over the [`SEED_PAIRS`] (each pair alone, then
+/// together):
 ///
-/// (a) each fused robot's landmark RMSE stays below the 0.10 m tests/slam.rs holds EKF-SLAM
-///     alone to;
-/// (b) each fused robot's mean landmark NEES stays below [`NEES_BOUND`], the widest a consistent
-///     map's mean NEES spreads (naive information-sum fusion, which counts the other's
-///     information again at every round, put it at 2.2e19);
+/// (a) each robot's landmark RMSE fused, averaged over the pairs, is no higher than its own
+///     alone over the same pairs: fusing the peer's map did not make its map worse;
+/// (b) each robot's fused mean landmark NEES, averaged over the pairs, is below the upper end
+///     of the 95% interval a consistent map's falls in over that many runs, χ²₂ᵣ(0.975)/R
+///     (R runs; a run's mean NEES has variance at most that of one χ²(2) whatever the
+///     correlation of its landmarks' errors, so this is the wide end; naive information-sum
+///     fusion, which counts the other's information again at every round, put it at 2.2e19);
 /// (c) fusion happened: each robot had rounds with a new peer map and intersected the landmarks
 ///     both had (fused, or kept where CI's optimum was its own estimate: the better robot may
-///     keep all of its own), and at least one robot's map changed.
+///     keep all of its own), and at least one robot's map changed in each pair.
 ///
-/// The peer's landmarks a robot has not mapped yet are left for it to map: added as independent
-/// landmarks they carried the peer's drift into this map once per landmark (the 50-run test
-/// shows the over-confidence that caused).
+/// Measured (two runs of the test; the fused runs are not bit for bit repeatable, the robots'
+/// clocks being independent): RMSE A 0.0121 and 0.0111 m fused against 0.0151 m alone, B 0.0186
+/// and 0.0181 m against 0.0234 and 0.0232 m; fused NEES A 0.78 and 0.98, B 1.18 and 1.18,
+/// against an upper end of 3.61. A single pair is no evidence either way: fused against alone,
+/// one robot's RMSE ranged from 0.045 against 0.031 m to 0.020 against 0.059 m. A peer map
+/// shifted by 0.1 m puts robot A's fused RMSE at 0.034 m; the peer's covariance taken at a
+/// quarter of what it is puts the fused NEES above 100.
+///
+/// The claims over 50 seeded runs of the filter alone are in
+/// processes/localization/tests/slam_two_robots.rs.
 #[test]
-fn two_robots_fuse_their_maps_by_ci_and_both_stay_accurate_and_consistent() {
+fn two_robots_fusing_their_maps_by_ci_map_no_worse_than_alone_and_stay_consistent() {
     let _serial = serial();
     let launch = LaunchDir::new();
     let stock = workspace().join("launch/stacks/lockstep.toml");
-    // Alone: both at once (lockstep: each the same run whatever the load).
-    let alone_stacks = [0, 1].map(|r| {
-        let namespace = unique_namespace(["two_a_alone", "two_b_alone"][r]);
-        start(&namespace, &stock, SEEDS[r])
-    });
-    let alone = alone_stacks.map(finish);
-    // Together: each robot's localization has the other's namespace as its peer.
-    let namespaces = [unique_namespace("two_a"), unique_namespace("two_b")];
-    let fused_stacks = [0, 1].map(|r| {
-        let file = launch.with_peer(["a.toml", "b.toml"][r], &namespaces[1 - r]);
-        start(&namespaces[r], &file, SEEDS[r])
-    });
-    let fused = fused_stacks.map(finish);
-
-    for (r, robot) in ["A", "B"].iter().enumerate() {
-        let (f, a) = (&fused[r], &alone[r]);
-        println!(
-            "robot {robot}: landmark RMSE {:.4} m fused, {:.4} m alone; NEES {:.3} fused, {:.3} \
-             alone (95% interval for independent errors {}); fusion rounds {}, fused {}, \
-             kept {}, unmapped {}, refused {}",
-            f.rmse(),
-            a.rmse(),
-            f.nees(),
-            a.nees(),
-            f.slam()
-                .landmark_nees_interval
-                .map_or("none".into(), |[lo, hi]| format!("{lo:.2}–{hi:.2}")),
-            f.fusion("rounds"),
-            f.fusion("fused"),
-            f.fusion("kept"),
-            f.fusion("unmapped"),
-            f.fusion("refused"),
-        );
+    let runs = SEED_PAIRS.len();
+    let (mut rmse_alone, mut rmse_fused, mut nees_fused) = ([0.0; 2], [0.0; 2], [0.0; 2]);
+    for seeds in SEED_PAIRS {
+        // Alone: both at once (lockstep: each the same run whatever the load).
+        let alone_stacks = [0, 1].map(|r| {
+            let namespace = unique_namespace(["two_a_alone", "two_b_alone"][r]);
+            start(&namespace, &stock, seeds[r])
+        });
+        let alone = alone_stacks.map(finish);
+        // Together: each robot's localization has the other's namespace as its peer.
+        let namespaces = [unique_namespace("two_a"), unique_namespace("two_b")];
+        let fused_stacks = [0, 1].map(|r| {
+            let file = launch.with_peer(["a.toml", "b.toml"][r], &namespaces[1 - r]);
+            start(&namespaces[r], &file, seeds[r])
+        });
+        let fused = fused_stacks.map(finish);
+        for (r, robot) in ["A", "B"].iter().enumerate() {
+            let (f, a) = (&fused[r], &alone[r]);
+            println!(
+                "seeds {seeds:?} robot {robot}: landmark RMSE {:.4} m fused, {:.4} m alone; NEES \
+                 {:.3} fused, {:.3} alone; fusion rounds {}, fused {}, kept {}, unmapped {}, \
+                 refused {}",
+                f.rmse(),
+                a.rmse(),
+                f.nees(),
+                a.nees(),
+                f.fusion("rounds"),
+                f.fusion("fused"),
+                f.fusion("kept"),
+                f.fusion("unmapped"),
+                f.fusion("refused"),
+            );
+            assert!(
+                f.fusion("rounds") > 0,
+                "seeds {seeds:?} robot {robot}: no round fused"
+            );
+            assert!(
+                f.fusion("fused") + f.fusion("kept") > 0,
+                "seeds {seeds:?} robot {robot}: no landmark both maps had"
+            );
+            rmse_alone[r] += a.rmse() / runs as f64;
+            rmse_fused[r] += f.rmse() / runs as f64;
+            nees_fused[r] += f.nees() / runs as f64;
+        }
         assert!(
-            f.rmse() < RMSE_BOUND,
-            "robot {robot} fused: landmark RMSE {} m (alone: A {} m, B {} m)",
-            f.rmse(),
-            alone[0].rmse(),
-            alone[1].rmse()
-        );
-        assert!(
-            f.nees() < NEES_BOUND,
-            "robot {robot} fused: landmark NEES {} above {NEES_BOUND} (alone {})",
-            f.nees(),
-            a.nees()
-        );
-        assert!(f.fusion("rounds") > 0, "robot {robot}: no round fused");
-        assert!(
-            f.fusion("fused") + f.fusion("kept") > 0,
-            "robot {robot}: no landmark both maps had"
+            fused.iter().any(|f| f.fusion("fused") > 0),
+            "seeds {seeds:?}: neither robot's map was changed by the other's"
         );
     }
-    assert!(
-        fused.iter().any(|f| f.fusion("fused") > 0),
-        "neither robot's map was changed by the other's"
-    );
+    let [_, nees_upper] = mean_nees_interval(2, runs as u32).expect("runs");
+    let mut broken = Vec::new();
+    for (r, robot) in ["A", "B"].iter().enumerate() {
+        println!(
+            "robot {robot}, mean of {runs} runs: landmark RMSE {:.4} m fused, {:.4} m alone; \
+             NEES {:.3} fused (95% upper end {nees_upper:.3})",
+            rmse_fused[r], rmse_alone[r], nees_fused[r]
+        );
+        if rmse_fused[r] > rmse_alone[r] {
+            broken.push(format!(
+                "robot {robot}: landmark RMSE {} m fused above {} m alone",
+                rmse_fused[r], rmse_alone[r]
+            ));
+        }
+        if nees_fused[r] >= nees_upper {
+            broken.push(format!(
+                "robot {robot} fused: mean landmark NEES {} above {nees_upper}",
+                nees_fused[r]
+            ));
+        }
+    }
+    assert!(broken.is_empty(), "{}", broken.join("\n"));
 }

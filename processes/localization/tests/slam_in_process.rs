@@ -4,6 +4,7 @@
 
 mod slam_sim;
 
+use mole_localization::slam::Linearisation;
 use mole_localization::{
     EkfSlamEstimator, Estimator, EstimatorKind, GraphSlamEstimator, Readings, build_estimator,
     resume,
@@ -100,11 +101,17 @@ fn landmarks_of_world() -> Vec<(f64, f64)> {
 
 /// GraphSLAM republishes the smoother's landmarks: after the smoother has solved the run, the
 /// published landmarks are no longer the front-end's, and over a seeded loop and a half (5
-/// seeds) they are closer to the truth than the front-end filter's.
+/// seeds) they are closer to the truth than those of an EKF-SLAM linearised at its estimates
+/// (Thrun's Table 10.1) on the same readings: the smoother relinearises every reading at its
+/// newest optimum. Measured: landmark RMSE 0.063 m smoothed against 0.082 m (mean of the 5
+/// seeds; better on each). The front-end itself, with its first-estimates Jacobians, is as
+/// close as the smoother (0.063 m; over 50 seeds 0.0861 m against the smoother's 0.0865 m):
+/// a filter's final map is already conditioned on every reading, so smoothing gains on the
+/// past poses (tests/slam.rs), not on the landmarks.
 #[test]
 fn graph_slam_republishes_the_smoothed_landmarks() {
     let map = world_map(0, &landmarks());
-    let (mut smoothed, mut filtered) = (0.0, 0.0);
+    let (mut smoothed, mut front_end, mut at_estimates) = (0.0, 0.0, 0.0);
     for seed in 0..5 {
         let mut graph = GraphSlamEstimator::from_map(&map).expect("smoother starts");
         drive(&mut graph, 450, seed);
@@ -116,13 +123,20 @@ fn graph_slam_republishes_the_smoothed_landmarks() {
         assert_ne!(published.landmarks, front.landmarks, "seed {seed}");
         let ids = |l: &Landmarks| l.landmarks().iter().map(|l| l.id).collect::<Vec<_>>();
         assert_eq!(ids(&published), ids(&front), "seed {seed}");
-        smoothed += landmark_rmse(&published);
-        filtered += landmark_rmse(&front);
+        let mut naive = EkfSlamEstimator::from_map(&map);
+        naive.filter_mut().linearisation = Linearisation::Estimate;
+        drive(&mut naive, 450, seed);
+        smoothed += landmark_rmse(&published) / 5.0;
+        front_end += landmark_rmse(&front) / 5.0;
+        at_estimates += landmark_rmse(&output(&naive).landmarks) / 5.0;
     }
-    println!("landmark RMSE over 5 seeds: smoothed {smoothed:.4} m, front-end {filtered:.4} m");
+    println!(
+        "landmark RMSE, mean of 5 seeds: smoothed {smoothed:.4} m, front-end {front_end:.4} m, \
+         EKF-SLAM linearised at its estimates {at_estimates:.4} m"
+    );
     assert!(
-        smoothed < filtered,
-        "smoothed {smoothed} ≥ filtered {filtered}"
+        smoothed < at_estimates,
+        "smoothed {smoothed} ≥ linearised at the estimates {at_estimates}"
     );
 }
 

@@ -25,10 +25,14 @@
 //! - New landmarks: mean x + r·(cos(θ + b), sin(θ + b)) (ours: the inverse observation model),
 //!   covariance I with zero cross-covariance, then the ordinary update with the same reading:
 //!   our `LandmarkInit::Prior { variance: 1.0 }` (Thrun's Table 10.2 with a finite prior).
+//! - Their Jacobians are taken at the current estimate: our `Linearisation::Estimate` (the
+//!   process uses the first estimates).
 //! - Their covariance update is P ← (I − K H) P; ours is the Joseph form, equal for the optimal
 //!   K up to rounding. They wrap the yaw once per step, we after each update: equal mod 2π.
 
-use mole_localization::slam::{Correspondence, EkfSlam, LandmarkInit, MotionModel, SlamConfig};
+use mole_localization::slam::{
+    Correspondence, EkfSlam, LandmarkInit, Linearisation, MotionModel, SlamConfig,
+};
 use mole_types::{BeaconReading, Pose2};
 use nalgebra::{Matrix2, Matrix3, Vector3};
 
@@ -143,6 +147,7 @@ fn ekf_slam_matches_python_robotics_on_a_fixed_sequence() {
         },
     );
     slam.landmark_init = LandmarkInit::Prior { variance: 1.0 };
+    slam.linearisation = Linearisation::Estimate;
     for ((v, w), readings) in inputs() {
         slam.predict(v, w, DT).expect("a plausible control");
         for r in &readings {

@@ -1,7 +1,7 @@
 //! Two robots running EKF-SLAM on the ring of `slam_sim`, each fusing the other's newest landmark
 //! map by covariance intersection (`PeerFusion`, as `mole-localization --peer` does), over
-//! [`RUNS`] seeded runs: the fused maps are more accurate than either robot's alone and no more
-//! over-confident than EKF-SLAM alone.
+//! [`RUNS`] seeded runs: the fused maps are more accurate than either robot's alone, EKF-SLAM
+//! alone is consistent, and the fused maps are not over-confident.
 
 mod slam_sim;
 
@@ -39,25 +39,37 @@ fn landmark_errors(map: &Landmarks) -> (f64, f64, usize) {
 #[derive(Debug, Default)]
 struct Score {
     squared_error: [f64; 2],
-    nees: [f64; 2],
     landmarks: [usize; 2],
+    /// Σ over the runs of the run's mean landmark NEES.
+    run_nees: [f64; 2],
+    runs: usize,
 }
 
 impl Score {
     fn rmse(&self, r: usize) -> f64 {
         (self.squared_error[r] / self.landmarks[r] as f64).sqrt()
     }
+    /// The mean over the runs of robot `r`'s mean landmark NEES.
     fn nees(&self, r: usize) -> f64 {
-        self.nees[r] / self.landmarks[r] as f64
+        self.run_nees[r] / self.runs as f64
     }
-    /// The upper end of the 95% χ² interval of robot `r`'s mean landmark NEES (2 dof each),
-    /// as if the landmark errors were independent (within a run they are not: all share the
-    /// robot's drift, so this interval is narrower than the statistic's true spread).
-    fn nees_upper(&self, r: usize) -> f64 {
-        let n = self.landmarks[r] as f64;
-        let chi2 = ChiSquared::new(2.0 * n).expect("positive dof");
-        chi2.inverse_cdf(0.975) / n
-    }
+}
+
+/// The two-sided 95% interval of [`Score::nees`] for a consistent filter: [χ²₂ᵣ(0.025)/R,
+/// χ²₂ᵣ(0.975)/R] over R runs. A run's landmark errors are not independent: every landmark
+/// carries the robot's drift, so a run's mean NEES spreads between χ²(2n)/n (independent
+/// errors, variance 4/n) and χ²(2) (one error shared by all, variance 4); its variance is at
+/// most 4 whatever the correlation, and the runs are independent, so the sum over R runs has
+/// mean 2R and variance at most 4R, as χ²(2R) has (measured: a run's mean NEES has a standard
+/// deviation of 1.5–1.8 against the 2 of one shared error and the 0.67 of nine independent
+/// ones). The interval of n·R independent errors, the one the summary reports for one run, is
+/// too narrow for this statistic.
+fn nees_interval(runs: usize) -> (f64, f64) {
+    let chi2 = ChiSquared::new(2.0 * runs as f64).expect("positive dof");
+    (
+        chi2.inverse_cdf(0.025) / runs as f64,
+        chi2.inverse_cdf(0.975) / runs as f64,
+    )
 }
 
 /// Robot A drives the ring from the start; robot B from the same start `delay` steps later (two
@@ -97,34 +109,45 @@ fn two_robots(delay: usize, fuse: bool) -> Score {
         for (r, map) in maps.iter().enumerate() {
             let (se, nees, n) = landmark_errors(map);
             score.squared_error[r] += se;
-            score.nees[r] += nees;
             score.landmarks[r] += n;
+            score.run_nees[r] += nees / n as f64;
         }
+        score.runs += 1;
     }
     score
 }
 
 /// Robot B a fifth of a lap behind A (60 steps, 6 s), so A's map holds landmarks B has not
-/// seen yet, and both fuse every 2 s: each fused robot's landmark RMSE is below both robots'
-/// alone (the issue's "no worse than either alone"), and its mean landmark NEES is no higher
-/// than its own alone: fusion by CI adds no over-confidence to EKF-SLAM's. Measured (50 runs):
-/// RMSE A 0.246 → 0.215 m, B 0.239 → 0.180 m; NEES A 2.68 → 2.21, B 2.29 → 1.29 (the 95% upper
-/// end for independent errors is 2.19: EKF-SLAM alone is already over it on this noisy ring,
-/// the over-confidence tests/slam_consistency.rs shows). When the fusion added the peer's
-/// landmarks it had not mapped as new independent ones, NEES rose to A 3.18, B 2.68.
+/// seen yet, and both fuse every 2 s:
+///
+/// (a) each fused robot's landmark RMSE is below both robots' alone;
+/// (b) EKF-SLAM alone is consistent: each robot's mean landmark NEES is inside the 95%
+///     interval of [`nees_interval`];
+/// (c) the fused maps are not over-confident: each fused robot's mean NEES is at most the
+///     interval's upper end (CI is consistent whatever the two maps' correlation); and the
+///     price of not knowing that correlation shows: it is even below the interval's lower end (under-confident: covariances about twice the squared
+///     errors). The same below the lower end when fusing every 0.5 s or every 10 s (A 1.11,
+///     1.26; B 0.92, 1.11): it is CI's, not the rounds'.
+///
+/// Measured (50 runs; interval 1.48–2.59): RMSE A 0.204 → 0.168 m, B 0.221 → 0.162 m; NEES A
+/// 2.08 alone → 1.13 fused, B 1.89 → 0.98. Linearised at its estimates (Thrun's Table 10.1)
+/// instead of its first estimates, EKF-SLAM alone was over-confident here (A 2.68, above the
+/// interval), and so were the fused maps when the fusion added the peer's landmarks it had not
+/// mapped as new independent ones (A 3.18, B 2.68).
 #[test]
-fn two_robots_fusing_by_ci_map_better_than_either_alone_and_no_more_over_confident() {
+fn two_robots_fusing_by_ci_map_better_than_either_alone_and_are_not_over_confident() {
     let delay = 60;
     let (alone, fused) = (two_robots(delay, false), two_robots(delay, true));
+    let (lo, hi) = nees_interval(alone.runs);
     for (r, robot) in ["A", "B"].iter().enumerate() {
         println!(
-            "robot {robot}: landmark RMSE {:.4} m fused, {:.4} m alone; NEES {:.3} fused, {:.3} \
-             alone (95% upper end for independent errors {:.3})",
+            "robot {robot}: landmark RMSE {:.4} m fused, {:.4} m alone; mean NEES {:.3} fused, \
+             {:.3} alone (95% interval over {} runs {lo:.3}–{hi:.3})",
             fused.rmse(r),
             alone.rmse(r),
             fused.nees(r),
             alone.nees(r),
-            fused.nees_upper(r)
+            alone.runs
         );
     }
     for (r, robot) in ["A", "B"].iter().enumerate() {
@@ -141,8 +164,20 @@ fn two_robots_fusing_by_ci_map_better_than_either_alone_and_no_more_over_confide
             alone.rmse(1)
         );
         assert!(
-            fused.nees(r) <= alone.nees(r),
-            "robot {robot} fused: landmark NEES {} above its own alone {}",
+            (lo..=hi).contains(&alone.nees(r)),
+            "robot {robot} alone: mean landmark NEES {} outside {lo}–{hi}",
+            alone.nees(r)
+        );
+        assert!(
+            fused.nees(r) <= hi,
+            "robot {robot} fused: mean landmark NEES {} above {hi}, over-confident (alone {})",
+            fused.nees(r),
+            alone.nees(r)
+        );
+        assert!(
+            fused.nees(r) < lo,
+            "robot {robot} fused: mean landmark NEES {} not below {lo}, CI's conservative \
+             (alone {})",
             fused.nees(r),
             alone.nees(r)
         );

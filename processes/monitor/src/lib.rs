@@ -15,7 +15,7 @@ mod track;
 mod truth;
 
 pub use ending::{Ending, LOCKSTEP_DRAIN, RunEnding};
-pub use slam::{CHI2_2_95, SlamSummary};
+pub use slam::{CHI2_2_95, SlamSummary, mean_nees_interval};
 pub use summary::{
     FaultRecord, LatencyUs, RunMeta, Summary, SwapRecord, TopicSummary, UpdateUs, fnv1a64,
     read_summary, write_summary,

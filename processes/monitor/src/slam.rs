@@ -165,7 +165,7 @@ pub(crate) fn nees_2d(e: &[f64; 2], cov: &[f64; 4]) -> Option<f64> {
 
 /// The two-sided 95% interval of the mean of n independent χ²_dof NEES values, as Bar-Shalom,
 /// Li & Kirubarajan (§5.4) test consistency: n·mean ~ χ²_{n·dof}. `None` for n = 0.
-pub(crate) fn mean_nees_interval(dof: u32, n: u32) -> Option<[f64; 2]> {
+pub fn mean_nees_interval(dof: u32, n: u32) -> Option<[f64; 2]> {
     let total = f64::from(dof) * f64::from(n);
     let chi2 = ChiSquared::new(total).ok()?;
     let n = f64::from(n);

@@ -23,6 +23,16 @@ pub trait MotionModel {
     fn jacobian_g(&self, pose: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Matrix3<f64>;
     /// R_t, the process noise added to the pose block.
     fn process_noise(&self, pose: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Matrix3<f64>;
+    /// G_t at the first estimates (Huang, Mourikis & Roumeliotis 2008): ∂g/∂x of a planar rigid
+    /// motion (a displacement fixed in the robot frame) whose displacement is `to` − `from`, the
+    /// pose's predicted estimates at this step and the last. The default is that of every model
+    /// of the form p' = p + R(θ) d(u), θ' = θ + Δθ(u), the unicycle's included.
+    fn jacobian_g_first_estimates(&self, from: &Vector3<f64>, to: &Vector3<f64>) -> Matrix3<f64> {
+        let mut g_t = Matrix3::identity();
+        g_t[(0, 2)] = -(to[1] - from[1]);
+        g_t[(1, 2)] = to[0] - from[0];
+        g_t
+    }
 }
 
 /// The crate's unicycle ([`crate::models`]) with R_t = V_t M_t V_tᵀ + floor (Thrun §7.4, Table
@@ -63,6 +73,23 @@ pub enum LandmarkInit {
     },
 }
 
+/// Where EKF-SLAM evaluates the Jacobians of the motion and of the readings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Linearisation {
+    /// At the current estimate, as Thrun's Table 10.1: G_t at μ_{t−1}, H at μ̄_t. The Jacobians
+    /// of successive steps are then evaluated at estimates that the corrections in between have
+    /// moved, and the filter gains information along the directions no reading observes (the
+    /// map frame's translation and rotation): over-confident after a loop or so (Huang &
+    /// Dissanayake 2007; Bailey et al. 2006).
+    Estimate,
+    /// First-estimates Jacobians (FEJ-EKF, Huang, Mourikis & Roumeliotis 2008): G_t from the
+    /// pose's predicted estimates at this step and the last, H at the pose predicted for this
+    /// step and the landmark's first estimate. The innovation still uses the current estimate;
+    /// only the linearisation points are frozen, so the linearised system keeps the
+    /// unobservable directions of the true one and the filter gains no spurious information.
+    FirstEstimates,
+}
+
 /// What [`EkfSlam::fuse_landmarks`] did with another robot's list.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FuseReport {
@@ -87,6 +114,8 @@ pub struct EkfSlam<M: MotionModel = UnicycleMotion> {
     pub q_t: Matrix2<f64>,
     /// How first sightings enter the state.
     pub landmark_init: LandmarkInit,
+    /// Where the Jacobians are evaluated.
+    pub linearisation: Linearisation,
     config: SlamConfig,
     gates: Gates,
     /// μ, 3 + 2·capacity long; entries past 3 + 2n are unused.
@@ -101,6 +130,11 @@ pub struct EkfSlam<M: MotionModel = UnicycleMotion> {
     ids: Vec<u32>,
     slots: SlotTable,
     tally: Tally,
+    /// The pose's predicted estimate μ̄_t of this step, the linearisation point of the pose
+    /// ([`Linearisation::FirstEstimates`]).
+    first_pose: Vector3<f64>,
+    /// Each landmark's first estimate, in slot order: its linearisation point.
+    first_landmarks: Vec<Vector2<f64>>,
 }
 
 /// Offset of landmark `slot` in the state vector.
@@ -156,10 +190,12 @@ impl<M: MotionModel> EkfSlam<M> {
         if usable {
             sigma.fixed_view_mut::<3, 3>(0, 0).copy_from(&s0);
         }
+        let first_pose = Vector3::new(mu[0], mu[1], mu[2]);
         Self {
             motion,
             q_t,
             landmark_init: LandmarkInit::InverseModel,
+            linearisation: Linearisation::FirstEstimates,
             gates: Gates::new(&config),
             config,
             mu,
@@ -170,6 +206,8 @@ impl<M: MotionModel> EkfSlam<M> {
             ids: Vec::with_capacity(capacity),
             slots: SlotTable::with_capacity(capacity),
             tally: Tally::default(),
+            first_pose,
+            first_landmarks: Vec::with_capacity(capacity),
         }
     }
 
@@ -253,9 +291,14 @@ impl<M: MotionModel> EkfSlam<M> {
             return Ok(());
         }
         let pose = self.pose_vector();
-        let g_t = self.motion.jacobian_g(&pose, v, omega, dt);
-        let r_t = self.motion.process_noise(&pose, v, omega, dt);
         let moved = self.motion.g(&pose, v, omega, dt);
+        let g_t = match self.linearisation {
+            Linearisation::Estimate => self.motion.jacobian_g(&pose, v, omega, dt),
+            Linearisation::FirstEstimates => self
+                .motion
+                .jacobian_g_first_estimates(&self.first_pose, &moved),
+        };
+        let r_t = self.motion.process_noise(&pose, v, omega, dt);
         if !(moved.iter().all(|v| v.is_finite())
             && g_t.iter().all(|v| v.is_finite())
             && r_t.iter().all(|v| v.is_finite()))
@@ -266,6 +309,7 @@ impl<M: MotionModel> EkfSlam<M> {
         self.mu[0] = moved[0];
         self.mu[1] = moved[1];
         self.mu[2] = wrap_angle(moved[2]);
+        self.first_pose = moved;
         let mut s_xx = g_t * self.pose_covariance() * g_t.transpose() + r_t;
         symmetrize(&mut s_xx);
         self.sigma.fixed_view_mut::<3, 3>(0, 0).copy_from(&s_xx);
@@ -363,7 +407,7 @@ impl<M: MotionModel> EkfSlam<M> {
         z: &Vector2<f64>,
     ) -> Option<(Vector2<f64>, Matrix2<f64>)> {
         let o = offset(slot);
-        let (z_hat, h_x, h_m) = observe(pose, &Vector2::new(self.mu[o], self.mu[o + 1]))?;
+        let (z_hat, h_x, h_m) = self.linearised(pose, slot)?;
         let s_xx = self.pose_covariance();
         let s_xm: SMatrix<f64, 3, 2> = self.sigma.fixed_view::<3, 2>(0, o).into_owned();
         let s_mm: Matrix2<f64> = self.sigma.fixed_view::<2, 2>(o, o).into_owned();
@@ -388,11 +432,31 @@ impl<M: MotionModel> EkfSlam<M> {
     ) -> Result<(), SlamError> {
         let pose = self.pose_vector();
         let o = offset(slot);
-        let (z_hat, h_x, h_m) =
-            observe(&pose, &Vector2::new(self.mu[o], self.mu[o + 1])).ok_or(SlamError::TooClose)?;
+        let (z_hat, h_x, h_m) = self.linearised(&pose, slot).ok_or(SlamError::TooClose)?;
         let nu = Vector2::new(z[0] - z_hat[0], wrap_angle(z[1] - z_hat[1]));
         let q_t = self.q_t;
         self.update(&nu, &h_x, o, &h_m, &q_t, gate)
+    }
+
+    /// ẑ = h(μₓ, μₘ) of landmark `slot` from the estimate `pose`, with ∂h/∂x and ∂h/∂m at the
+    /// linearisation points [`EkfSlam::linearisation`] names (the estimate when the first
+    /// estimates are too close for a bearing).
+    fn linearised(
+        &self,
+        pose: &Vector3<f64>,
+        slot: usize,
+    ) -> Option<(Vector2<f64>, Matrix2x3<f64>, Matrix2<f64>)> {
+        let o = offset(slot);
+        let estimate = observe(pose, &Vector2::new(self.mu[o], self.mu[o + 1]))?;
+        if self.linearisation == Linearisation::Estimate {
+            return Some(estimate);
+        }
+        Some(
+            match observe(&self.first_pose, &self.first_landmarks[slot]) {
+                Some((_, h_x, h_m)) => (estimate.0, h_x, h_m),
+                None => estimate,
+            },
+        )
     }
 
     /// The Kalman update for a 2-D measurement whose Jacobian H is `h_x` on the pose columns
@@ -487,7 +551,17 @@ impl<M: MotionModel> EkfSlam<M> {
             return Err(SlamError::MapFull);
         }
         let pose = self.pose_vector();
-        let (m, j_x, j_z) = inverse_range_bearing(&pose, z);
+        let (m, mut j_x, mut j_z) = inverse_range_bearing(&pose, z);
+        // First estimates: the landmark's linearisation point is where the reading puts it
+        // from the pose's linearisation point, and the Jacobians are taken there.
+        let first = match self.linearisation {
+            Linearisation::Estimate => m,
+            Linearisation::FirstEstimates => {
+                let (m_first, j_x_first, j_z_first) = inverse_range_bearing(&self.first_pose, z);
+                (j_x, j_z) = (j_x_first, j_z_first);
+                m_first
+            }
+        };
         let slot = self.n;
         let o = offset(slot);
         match self.landmark_init {
@@ -519,7 +593,7 @@ impl<M: MotionModel> EkfSlam<M> {
                 self.set_landmark_block(o, &m, &(Matrix2::identity() * variance));
             }
         }
-        self.activate(slot, id);
+        self.activate(slot, id, first);
         if let LandmarkInit::Prior { .. } = self.landmark_init
             && let Err(e) = self.update_landmark(slot, z, f64::INFINITY)
         {
@@ -538,10 +612,11 @@ impl<M: MotionModel> EkfSlam<M> {
         self.sigma.fixed_view_mut::<2, 2>(o, o).copy_from(&s);
     }
 
-    /// Makes `slot` (= n) active with `id`.
-    fn activate(&mut self, slot: usize, id: u32) {
+    /// Makes `slot` (= n) active with `id`, linearised at `first` from now on.
+    fn activate(&mut self, slot: usize, id: u32, first: Vector2<f64>) {
         debug_assert_eq!(slot, self.n);
         self.ids.push(id);
+        self.first_landmarks.push(first);
         if self.config.correspondence == Correspondence::Known && id != LANDMARK_ANONYMOUS {
             self.slots.insert(id, slot);
         }
@@ -605,7 +680,7 @@ impl<M: MotionModel> EkfSlam<M> {
             }
         }
         self.set_landmark_block(o, &landmark.mean, &landmark.cov);
-        self.activate(slot, landmark.id);
+        self.activate(slot, landmark.id, landmark.mean);
         Ok(slot)
     }
 

@@ -140,6 +140,11 @@ impl EkfSlamEstimator {
         &self.slam
     }
 
+    /// The filter, to change its settings (its linearisation, say) before a run.
+    pub fn filter_mut(&mut self) -> &mut EkfSlam {
+        &mut self.slam
+    }
+
     /// What became of each beacon reading of the last correction, in the message's order.
     pub fn decisions(&self) -> &[Result<Association, SlamError>] {
         &self.decisions

@@ -29,7 +29,7 @@ mod fastslam;
 mod peer;
 
 pub use ci::{Fused, covariance_intersection};
-pub use ekf_slam::{EkfSlam, FuseReport, LandmarkInit, MotionModel, UnicycleMotion};
+pub use ekf_slam::{EkfSlam, FuseReport, LandmarkInit, Linearisation, MotionModel, UnicycleMotion};
 pub use estimators::{EkfSlamEstimator, FastSlamEstimator, SLAM_CAPACITY, write_landmarks};
 pub use fastslam::{FastSlam, FastSlamConfig};
 pub use peer::{
