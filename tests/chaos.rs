@@ -18,18 +18,10 @@ fn fault(namespace: &str, args: &[&str]) -> Output {
     run_mole(&all)
 }
 
-fn text(output: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    )
-}
-
 /// Injects a fault that must be accepted; returns what `mole fault` said.
 fn inject(stack: &Stack, args: &[&str]) -> String {
     let output = fault(&stack.namespace, args);
-    let said = text(&output);
+    let said = output_text(&output);
     assert!(
         output.status.success(),
         "mole fault {args:?}: {said}\n{}",
@@ -84,8 +76,8 @@ fn wait_for_state(pid: u32, wanted: char, is: bool, timeout: Duration) {
 fn bad_fault_requests_are_refused_and_inject_nothing() {
     let _serial = serial();
     let output = fault("t-nobody-runs-here", &["kill", "planning"]);
-    assert_eq!(output.status.code(), Some(2), "{}", text(&output));
-    assert!(text(&output).contains("no stack runs in namespace `t-nobody-runs-here`"));
+    assert_eq!(output.status.code(), Some(2), "{}", output_text(&output));
+    assert!(output_text(&output).contains("no stack runs in namespace `t-nobody-runs-here`"));
 
     let stack = Stack::start("fault-bad", &["--mode", "lockstep", "--ticks", "1000000"]);
     stack.wait_for_log(Role::World.name(), "ready", Duration::from_secs(60));
@@ -112,8 +104,17 @@ fn bad_fault_requests_are_refused_and_inject_nothing() {
         ),
     ] {
         let output = fault(&stack.namespace, args);
-        assert_eq!(output.status.code(), Some(2), "{args:?}: {}", text(&output));
-        assert!(text(&output).contains(why), "{args:?}: {}", text(&output));
+        assert_eq!(
+            output.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            output_text(&output)
+        );
+        assert!(
+            output_text(&output).contains(why),
+            "{args:?}: {}",
+            output_text(&output)
+        );
     }
     signal(stack.pid(), nix::sys::signal::Signal::SIGINT);
     let run = finish(stack);
@@ -318,7 +319,7 @@ fn a_chaos_session_ends_its_run_cleanly_in_either_clock_mode() {
         assert!(
             run.output.status.success(),
             "{mode}: {}\n{}",
-            text(&run.output),
+            output_text(&run.output),
             run.logs
         );
         assert_eq!(run.summary.exit_reason, "interrupted", "{mode}");

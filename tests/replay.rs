@@ -144,14 +144,6 @@ fn replay_to_end(file: &Path, namespace: &str, out: &Path) -> Output {
     ])
 }
 
-fn text(output: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    )
-}
-
 /// The samples of `topics` in a recording by (tick, topic), the first of each, with what two
 /// runs of the same inputs may differ in zeroed (the docs' list: the header's `seq`, `stamp_ns`
 /// and `origin_ns`, the pose's `update_ns`). Worked out here from the file, apart from the code
@@ -276,7 +268,7 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     namespaces.push(same.namespace.clone());
     let out = same.out.clone();
     let output = same.wait();
-    let said = text(&output);
+    let said = output_text(&output);
     assert!(output.status.success(), "{said}\n{}", logs(&out));
     assert!(said.contains("check: identical"), "{said}");
     let replayed = summary(&out);
@@ -288,7 +280,7 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     namespaces.push(changed.namespace.clone());
     let replayed = changed.out.join("replay/replayed.mcap");
     let changed = changed.wait();
-    let said = text(&changed);
+    let said = output_text(&changed);
     assert_eq!(changed.status.code(), Some(1), "{said}");
     let failure = said
         .lines()
@@ -321,7 +313,7 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     namespaces.push(window.namespace.clone());
     let out = window.out.clone();
     let output = window.wait();
-    assert!(output.status.success(), "{}", text(&output));
+    assert!(output.status.success(), "{}", output_text(&output));
     let cut = summary(&out);
     assert_eq!((cut.ticks, cut.exit_reason.as_str()), (120, "ticks"));
     for namespace in &namespaces {
@@ -335,7 +327,7 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     let bytes = std::fs::read(&file).expect("read the recording");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write a truncated copy");
     let output = run_mole(&["replay", &cut.display().to_string(), "--quiet"]);
-    let said = text(&output);
+    let said = output_text(&output);
     assert_eq!(output.status.code(), Some(2), "{said}");
     assert!(said.contains(&cut.display().to_string()), "{said}");
     assert!(said.contains("truncated"), "{said}");
@@ -382,7 +374,7 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
         let namespace = unique_namespace("replay-refused");
         let out = dir.0.join(&namespace);
         let output = replay_to_end(copy, &namespace, &out);
-        let said = text(&output);
+        let said = output_text(&output);
         assert_eq!(output.status.code(), Some(2), "{said}");
         assert!(
             said.contains(&format!("{}: {why}", copy.display())),
@@ -397,7 +389,7 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     let running = processes_of(&busy.namespace);
     let out = dir.0.join("into-busy");
     let output = replay_to_end(&file, &busy.namespace, &out);
-    let said = text(&output);
+    let said = output_text(&output);
     assert_eq!(output.status.code(), Some(2), "{said}");
     assert!(
         said.contains(&busy.namespace) && said.contains("in use"),
@@ -423,7 +415,7 @@ fn bad_files_and_unknown_roles_are_refused_naming_them() {
     std::fs::write(&garbage, b"not a recording").unwrap();
     for (file, why) in [(&missing, "No such file"), (&garbage, "not an MCAP file")] {
         let output = run_mole(&["replay", &file.display().to_string()]);
-        let said = text(&output);
+        let said = output_text(&output);
         assert_eq!(output.status.code(), Some(2), "{said}");
         assert!(said.contains(&file.display().to_string()), "{said}");
         assert!(said.contains(why), "{said}");
@@ -434,7 +426,7 @@ fn bad_files_and_unknown_roles_are_refused_naming_them() {
         "--replace",
         "world,sensors",
     ]);
-    let said = text(&output);
+    let said = output_text(&output);
     assert_eq!(output.status.code(), Some(2), "{said}");
     assert!(said.contains("unknown role `sensors`"), "{said}");
 }

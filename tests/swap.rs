@@ -15,14 +15,6 @@ fn mole_swap(namespace: &str, args: &[&str]) -> Output {
     run_mole(&all)
 }
 
-fn text(output: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    )
-}
-
 /// Whether a role's log shows its replacement going on from its predecessor's step output.
 fn took_over(log: &str, role: Role) -> bool {
     let topic = role
@@ -64,13 +56,26 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
         ),
     ] {
         let out = mole_swap(&ns, args);
-        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", text(&out));
-        assert!(text(&out).contains(needle), "{args:?}: {}", text(&out));
+        assert_eq!(
+            out.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            output_text(&out)
+        );
+        assert!(
+            output_text(&out).contains(needle),
+            "{args:?}: {}",
+            output_text(&out)
+        );
     }
     // A replacement that dies while starting: exit 1, and the old process keeps the role.
     let out = mole_swap(&ns, &[planning.role.name(), "/bin/false"]);
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert!(text(&out).contains("keeps running"), "{}", text(&out));
+    assert_eq!(out.status.code(), Some(1), "{}", output_text(&out));
+    assert!(
+        output_text(&out).contains("keeps running"),
+        "{}",
+        output_text(&out)
+    );
 
     // Real swaps of every swappable role, quoted commands and words. Mapping and
     // localization take over their predecessor's grids and estimate.
@@ -84,21 +89,25 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
         let command = format!("{}{options}", row.program);
         let args = [row.role.name(), command.as_str()];
         let out = mole_swap(&ns, &args);
-        assert!(out.status.success(), "{args:?}: {}", text(&out));
+        assert!(out.status.success(), "{args:?}: {}", output_text(&out));
         assert!(
-            text(&out).contains("lockstep: 0 steps lost, 0 repeated"),
+            output_text(&out).contains("lockstep: 0 steps lost, 0 repeated"),
             "{}\n{}",
-            text(&out),
+            output_text(&out),
             logs(&stack.out)
         );
     }
     let out = run_mole(&["status", "--namespace", &ns]);
-    assert!(out.status.success(), "{}", text(&out));
+    assert!(out.status.success(), "{}", output_text(&out));
     let planning_line = format!("{} (pid", planning.role);
-    assert!(text(&out).contains(&planning_line), "{}", text(&out));
+    assert!(
+        output_text(&out).contains(&planning_line),
+        "{}",
+        output_text(&out)
+    );
 
     let out = run_mole(&["stop", "--namespace", &ns]);
-    assert!(out.status.success(), "{}", text(&out));
+    assert!(out.status.success(), "{}", output_text(&out));
     let keep = std::env::temp_dir().join(format!("mole-keep-{ns}"));
     let output = stack.wait_and_copy(&keep, Duration::from_secs(60));
     assert!(output.status.success(), "{}", logs(&keep));
@@ -151,11 +160,11 @@ fn a_realtime_swap_reports_its_gap_and_the_run_completes() {
     // Another estimator, which takes over the running estimate instead of starting over.
     let command = format!("{} --estimator {}", localization.program, EstimatorKind::Pf);
     let out = mole_swap(&stack.namespace, &[localization.role.name(), &command]);
-    assert!(out.status.success(), "{}", text(&out));
+    assert!(out.status.success(), "{}", output_text(&out));
     assert!(
-        text(&out).contains("localization/pose silent for at most"),
+        output_text(&out).contains("localization/pose silent for at most"),
         "{}",
-        text(&out)
+        output_text(&out)
     );
     // Every topic of the stack is an iceoryx2 service listed with its documented type name
     // (what `iox2 service list` shows).
@@ -208,6 +217,10 @@ fn swap_with_no_stack_in_the_namespace_is_bad_input() {
         &unique_namespace("swap-none"),
         &[planning.role.name(), planning.program],
     );
-    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
-    assert!(text(&out).contains("no stack is running"), "{}", text(&out));
+    assert_eq!(out.status.code(), Some(2), "{}", output_text(&out));
+    assert!(
+        output_text(&out).contains("no stack is running"),
+        "{}",
+        output_text(&out)
+    );
 }

@@ -77,20 +77,6 @@ impl Run {
     }
 }
 
-/// `text` without the terminal colour codes tracing writes.
-fn without_colours(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    let mut chars = text.chars();
-    while let Some(c) = chars.next() {
-        if c == '\u{1b}' {
-            chars.by_ref().find(|&c| c == 'm');
-        } else {
-            out.push(c);
-        }
-    }
-    out
-}
-
 /// A directory of launch files, removed when the test ends, however it ends.
 struct LaunchDir(PathBuf);
 

@@ -165,14 +165,7 @@ enum Whole {
 /// Waits until the launcher's process table (`stack/processes`, once a second) shows every role
 /// running, in two tables published after the wait began (the first may predate a restart).
 fn wait_until_whole(namespace: &str, mode: ClockMode) -> Result<Whole, Failure> {
-    let common = CommonArgs {
-        namespace: namespace.to_string(),
-        mode,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-    };
+    let common = CommonArgs::attach(namespace, mode);
     let shutdown = Arc::new(AtomicBool::new(false));
     let attach = |e: mole_runtime::RuntimeError| Failure::run(format!("chaos: {e}"));
     let mut ctx = Context::with_shutdown_flag(CHAOS_NODE, &common, shutdown).map_err(attach)?;

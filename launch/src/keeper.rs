@@ -130,14 +130,7 @@ mod tests {
     #[test]
     fn a_restart_gets_the_last_output_kept_and_the_directory_goes_at_the_end() {
         let namespace = format!("keeper-test-{}", std::process::id());
-        let common = CommonArgs {
-            namespace,
-            mode: ClockMode::Realtime,
-            rate_hz: 100.0,
-            seed: None,
-            takeover: false,
-            resume: None,
-        };
+        let common = CommonArgs::attach(&namespace, ClockMode::Realtime);
         let dir = std::env::temp_dir().join(format!("mole-keeper-test-{}", std::process::id()));
         let keeper = Keeper::start(&common, dir.clone()).expect("a keeper");
         let flag = Arc::new(AtomicBool::new(false));

@@ -47,14 +47,7 @@ fn open(namespace: &str, shutdown: Arc<AtomicBool>) -> Result<(Context, Ports), 
     // The services keep the stack's clock mode (it decides whether they may drop); try both.
     let mut last_error = String::new();
     for mode in [ClockMode::Realtime, ClockMode::Lockstep] {
-        let args = CommonArgs {
-            namespace: namespace.to_string(),
-            mode,
-            rate_hz: 100.0,
-            seed: None,
-            takeover: false,
-            resume: None,
-        };
+        let args = CommonArgs::attach(namespace, mode);
         let ctx = Context::with_shutdown_flag(TOP_ROLE, &args, shutdown.clone())
             .map_err(|e| Failure::run(e.to_string()))?;
         let ports = (|| {

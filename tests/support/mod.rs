@@ -272,6 +272,15 @@ pub fn run_mole(args: &[&str]) -> Output {
         .expect("run mole")
 }
 
+/// What a finished command wrote, stdout then stderr, as text.
+pub fn output_text(output: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    )
+}
+
 /// `text` without the terminal colour codes tracing writes into the logs.
 pub fn without_colours(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
@@ -404,14 +413,7 @@ pub fn left_behind(before: &[String]) -> Vec<String> {
 
 /// A context of the test's own in a running realtime stack (a rogue publisher, an observer).
 pub fn join_realtime_stack(namespace: &str, role: &str) -> mole_runtime::Context {
-    let args = mole_runtime::CommonArgs {
-        namespace: namespace.to_string(),
-        mode: mole_runtime::ClockMode::Realtime,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-    };
+    let args = mole_runtime::CommonArgs::attach(namespace, mole_runtime::ClockMode::Realtime);
     let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     mole_runtime::Context::with_shutdown_flag(role, &args, shutdown)
         .unwrap_or_else(|e| panic!("{role} joins {namespace}: {e}"))
@@ -563,14 +565,7 @@ pub fn join_stack(
     role: &str,
     mode: mole_runtime::ClockMode,
 ) -> mole_runtime::Context {
-    let args = mole_runtime::CommonArgs {
-        namespace: namespace.to_string(),
-        mode,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-    };
+    let args = mole_runtime::CommonArgs::attach(namespace, mode);
     let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let mut ctx = mole_runtime::Context::with_shutdown_flag(role, &args, shutdown)
         .unwrap_or_else(|e| panic!("{role} joins {namespace}: {e}"));

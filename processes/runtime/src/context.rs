@@ -50,6 +50,21 @@ pub struct CommonArgs {
     pub resume: Option<std::path::PathBuf>,
 }
 
+impl CommonArgs {
+    /// The arguments of a program that attaches to a running stack of clock `mode` to watch or
+    /// steer it (a tool, a test): no seed, no takeover, nothing to resume.
+    pub fn attach(namespace: &str, mode: ClockMode) -> CommonArgs {
+        CommonArgs {
+            namespace: namespace.to_string(),
+            mode,
+            rate_hz: 100.0,
+            seed: None,
+            takeover: false,
+            resume: None,
+        }
+    }
+}
+
 type PubSubFactory<M> =
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, M, ()>;
 type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
