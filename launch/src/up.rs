@@ -367,21 +367,32 @@ fn start(
     } = stack.plan;
     tracing::info!(namespace = %args.namespace, %mode, ticks, seed, "starting the stack");
     for index in order {
-        let dependencies = stack.plan.launch.processes[index].depends_on.clone();
-        for dependency in &dependencies {
-            wait_ready(&mut stack, dependency)?;
+        if let Err(failure) = start_process(&mut stack, index) {
+            // The processes already started are killed (the supervisor's drop) before they
+            // could clean up: what they leave in shared memory is swept.
+            drop(stack);
+            cleanup_dead_nodes();
+            return Err(failure);
         }
-        let process = &stack.plan.launch.processes[index];
-        let program = stack.plan.programs[&process.role].clone();
-        let mut spec = ChildSpec::from_process(process, program, log_of(args, &process.role));
-        let own = std::mem::take(&mut spec.env);
-        spec.env = stack.plan.env.iter().cloned().chain(own).collect();
-        stack
-            .supervisor
-            .spawn(spec)
-            .map_err(|e| Failure::run(e.to_string()))?;
     }
     Ok(stack)
+}
+
+/// Starts the process `index` of the launch file once those it depends on are ready.
+fn start_process(stack: &mut Stack<'_>, index: usize) -> Result<(), Failure> {
+    let dependencies = stack.plan.launch.processes[index].depends_on.clone();
+    for dependency in &dependencies {
+        wait_ready(stack, dependency)?;
+    }
+    let process = &stack.plan.launch.processes[index];
+    let program = stack.plan.programs[&process.role].clone();
+    let mut spec = ChildSpec::from_process(process, program, log_of(stack.args, &process.role));
+    let own = std::mem::take(&mut spec.env);
+    spec.env = stack.plan.env.iter().cloned().chain(own).collect();
+    stack
+        .supervisor
+        .spawn(spec)
+        .map_err(|e| Failure::run(e.to_string()))
 }
 
 /// The stack's settings as its processes take them.
