@@ -1043,7 +1043,14 @@ pub(crate) fn last_error_line(log: &Path) -> String {
 
 /// Waits until `role` announced its ports (its first `stack/stats`).
 fn wait_ready(stack: &mut Stack<'_>, role: &str) -> Result<(), Failure> {
-    let deadline = Instant::now() + READY_TIMEOUT;
+    // A bridge waits up to PEER_TIMEOUT for the other half, then ends saying why: its reason,
+    // not this timeout, is the news.
+    let timeout = if role == mole_types::link::BRIDGE_ROLE {
+        mole_types::link::PEER_TIMEOUT + READY_TIMEOUT
+    } else {
+        READY_TIMEOUT
+    };
+    let deadline = Instant::now() + timeout;
     loop {
         let ready = &mut stack.watch.ready;
         stack.ports.stats.drain(|s| {
@@ -1062,7 +1069,7 @@ fn wait_ready(stack: &mut Stack<'_>, role: &str) -> Result<(), Failure> {
         }
         if Instant::now() > deadline {
             return Err(Failure::run(format!(
-                "`{role}` did not become ready within {READY_TIMEOUT:?}"
+                "`{role}` did not become ready within {timeout:?}"
             )));
         }
         std::thread::sleep(Duration::from_millis(10));
