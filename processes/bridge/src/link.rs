@@ -8,7 +8,7 @@
 
 use crate::key_expr;
 use mole_types::link::{BRIDGE_ROLE, PEER_TIMEOUT};
-use std::collections::BTreeSet;
+use std::collections::BTreeMap;
 
 /// One bridge on the link: its namespace and the namespace it expects its peer in.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
@@ -70,7 +70,9 @@ pub enum LinkChange {
 #[derive(Debug, Clone)]
 pub struct LinkWatch {
     me: LinkToken,
-    strangers: BTreeSet<LinkToken>,
+    /// Every other bridge seen on the link, and whether it is there now: one that left before
+    /// this bridge gave up (it gave up first) is still what this bridge saw.
+    strangers: BTreeMap<LinkToken, bool>,
     up: bool,
     /// The peer came (back) since [`LinkWatch::came_back`] was last asked.
     arrived: bool,
@@ -86,7 +88,7 @@ impl LinkWatch {
                 namespace: namespace.to_owned(),
                 peer: peer.to_owned(),
             },
-            strangers: BTreeSet::new(),
+            strangers: BTreeMap::new(),
             up: false,
             arrived: false,
             losses: 0,
@@ -133,11 +135,9 @@ impl LinkWatch {
                 _ => LinkChange::Nothing,
             };
         }
-        if alive && self.strangers.insert(token.clone()) {
+        let was_there = self.strangers.insert(token.clone(), alive);
+        if alive && was_there != Some(true) {
             return LinkChange::Stranger(token);
-        }
-        if !alive {
-            self.strangers.remove(&token);
         }
         LinkChange::Nothing
     }
@@ -164,15 +164,22 @@ impl LinkWatch {
     }
 
     /// Why a bridge gives up when its peer did not come within [`PEER_TIMEOUT`]: what it saw on
-    /// the link (the strangers, or nobody; `endpoints` says where it looked) and what it
+    /// the link (the strangers, there or gone, or nobody; `endpoints` says where it looked) and what it
     /// expected.
     #[must_use]
     pub fn gave_up(&self, endpoints: &str) -> String {
         let seen = if self.strangers.is_empty() {
             format!("no bridge on the link ({endpoints})")
         } else {
-            let strangers: Vec<String> = self.strangers.iter().map(|s| s.to_string()).collect();
-            format!("on the link is the bridge of {}", strangers.join(", and of "))
+            let strangers: Vec<String> = self
+                .strangers
+                .iter()
+                .map(|(stranger, there)| {
+                    let tense = if *there { "is" } else { "was" };
+                    format!("on the link {tense} the bridge of {stranger}")
+                })
+                .collect();
+            strangers.join(", and ")
         };
         format!(
             "the peer's bridge did not come within {PEER_TIMEOUT:?}: {seen}; this half is {} \
@@ -242,14 +249,26 @@ mod tests {
 
     #[test]
     fn nobody_on_the_link_is_said_with_where_the_bridge_looked() {
-        let mut watch = LinkWatch::new("a", "b");
-        let stranger = "mole/c/bridge/a";
-        watch.saw(stranger, true);
-        watch.saw(stranger, false);
+        let watch = LinkWatch::new("a", "b");
         let why = watch.gave_up("connecting to tcp/10.0.0.2:7447");
         assert!(
             why.contains("no bridge on the link (connecting to tcp/10.0.0.2:7447)"),
             "{why}"
         );
+    }
+
+    /// The other half's bridge gave up first and left: it is still what this one saw.
+    #[test]
+    fn a_stranger_that_left_is_said_as_seen() {
+        let mut watch = LinkWatch::new("a", "b");
+        let stranger = "mole/c/bridge/a";
+        assert!(matches!(watch.saw(stranger, true), LinkChange::Stranger(_)));
+        assert_eq!(watch.saw(stranger, false), LinkChange::Nothing);
+        let why = watch.gave_up("connecting to tcp/10.0.0.2:7447");
+        assert!(
+            why.contains("on the link was the bridge of namespace `c` with peer_namespace `a`"),
+            "{why}"
+        );
+        assert!(matches!(watch.saw(stranger, true), LinkChange::Stranger(_)), "back");
     }
 }
