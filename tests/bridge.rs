@@ -363,11 +363,26 @@ fn halves_whose_namespaces_do_not_meet_both_end_saying_what_they_see() {
     let on_output = onboard.wait(Duration::from_secs(120));
     let off_output = offboard.wait(Duration::from_secs(120));
     for (half, output, out, own, own_peer, seen, seen_peer) in [
-        ("on board", &on_output, &on_out, &on_ns, &expected, &wrong, &on_ns),
-        ("off board", &off_output, &off_out, &wrong, &on_ns, &on_ns, &expected),
+        (
+            "on board", &on_output, &on_out, &on_ns, &expected, &wrong, &on_ns,
+        ),
+        (
+            "off board",
+            &off_output,
+            &off_out,
+            &wrong,
+            &on_ns,
+            &on_ns,
+            &expected,
+        ),
     ] {
         let stderr = String::from_utf8_lossy(&output.stderr);
-        assert_eq!(output.status.code(), Some(2), "{half}:\n{stderr}\n{}", logs(out));
+        assert_eq!(
+            output.status.code(),
+            Some(2),
+            "{half}:\n{stderr}\n{}",
+            logs(out)
+        );
         for needle in [
             format!(
                 "`bridge` refused its input: the peer's bridge did not come within {:?}",
@@ -377,7 +392,10 @@ fn halves_whose_namespaces_do_not_meet_both_end_saying_what_they_see() {
             format!("the bridge of namespace `{seen}` with peer_namespace `{seen_peer}`"),
             format!("this half is namespace `{own}` with peer_namespace `{own_peer}`"),
         ] {
-            assert!(stderr.contains(&needle), "{half}: no `{needle}` in:\n{stderr}");
+            assert!(
+                stderr.contains(&needle),
+                "{half}: no `{needle}` in:\n{stderr}"
+            );
         }
         let bridge_log = std::fs::read_to_string(out.join("logs/bridge.log")).unwrap_or_default();
         let warning = format!("another bridge on the link: namespace `{seen}`");

@@ -211,7 +211,10 @@ mod tests {
     #[test]
     fn the_link_is_up_only_with_the_peer_that_expects_this_side() {
         let mut watch = LinkWatch::new("onboard", "offboard");
-        assert_eq!(watch.saw("mole/onboard/bridge/offboard", true), LinkChange::Nothing);
+        assert_eq!(
+            watch.saw("mole/onboard/bridge/offboard", true),
+            LinkChange::Nothing
+        );
         // The off-board half started with another namespace, expecting this one.
         let wrong = "mole/offboard2/bridge/onboard";
         assert_eq!(
@@ -238,13 +241,19 @@ mod tests {
             assert!(why.contains(needle), "no `{needle}` in: {why}");
         }
 
-        assert_eq!(watch.saw("mole/offboard/bridge/onboard", true), LinkChange::Up);
+        assert_eq!(
+            watch.saw("mole/offboard/bridge/onboard", true),
+            LinkChange::Up
+        );
         assert!(watch.is_up() && watch.came_back() && !watch.came_back());
         assert_eq!(
             watch.saw("mole/offboard/bridge/onboard", false),
             LinkChange::Down { losses: 1 }
         );
-        assert_eq!(watch.saw("mole/offboard/bridge/onboard", true), LinkChange::Up);
+        assert_eq!(
+            watch.saw("mole/offboard/bridge/onboard", true),
+            LinkChange::Up
+        );
     }
 
     #[test]
@@ -269,6 +278,9 @@ mod tests {
             why.contains("on the link was the bridge of namespace `c` with peer_namespace `a`"),
             "{why}"
         );
-        assert!(matches!(watch.saw(stranger, true), LinkChange::Stranger(_)), "back");
+        assert!(
+            matches!(watch.saw(stranger, true), LinkChange::Stranger(_)),
+            "back"
+        );
     }
 }

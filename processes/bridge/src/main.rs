@@ -20,9 +20,9 @@ use mole_bridge::{
     BridgeSpec, Delivery, Entry, Forward, Forwarding, LISTENING, LinkChange, LinkWatch, Outbound,
     Staged, Tls, delivery, descriptor, every_link_token, key_expr, send_in_order,
 };
-use mole_types::link::{LISTENING_FILE, PEER_TIMEOUT};
 use mole_runtime::{BadInput, CommonArgs, Context, Publisher, Ringer, Subscriber};
 use mole_runtime::{Wake, Waker, layout_mismatch};
+use mole_types::link::{LISTENING_FILE, PEER_TIMEOUT};
 use mole_types::topics::{self, TopicVisitor};
 use mole_types::{Message, Topic, env};
 use std::path::{Path, PathBuf};
@@ -84,7 +84,10 @@ fn main() -> ExitCode {
 fn run(args: &Args) -> Result<(), Failed> {
     let mut spec = spec_of(args)?;
     let listening = args.out_dir.as_ref().map(|out| out.join(LISTENING_FILE));
-    if let Some(again) = listening.as_deref().and_then(|file| listen_again(&spec, file)) {
+    if let Some(again) = listening
+        .as_deref()
+        .and_then(|file| listen_again(&spec, file))
+    {
         spec.listen = again;
     }
     let mut ctx = Context::new(ROLE, &args.common)?;
@@ -100,10 +103,7 @@ fn run(args: &Args) -> Result<(), Failed> {
     let link = Link::watch(&session, &spec, &ringer)?;
     let mut outs = open_outs(&ctx, &session, &spec)?;
     let mut ins = open_ins(&ctx, &session, &spec, &inbox)?;
-    let _token = session
-        .liveliness()
-        .declare_token(link.own_key())
-        .wait()?;
+    let _token = session.liveliness().declare_token(link.own_key()).wait()?;
     tracing::info!(
         peer = %spec.peer_namespace,
         listen = ?spec.listen.iter().map(|e| e.as_str()).collect::<Vec<_>>(),
@@ -186,7 +186,11 @@ fn report_listening(
     }
     spec.listen = bound;
     if let Some(file) = file {
-        let text: String = spec.listen.iter().map(|e| format!("{}\n", e.as_str())).collect();
+        let text: String = spec
+            .listen
+            .iter()
+            .map(|e| format!("{}\n", e.as_str()))
+            .collect();
         let partial = file.with_extension("partial");
         std::fs::write(&partial, text)
             .and_then(|()| std::fs::rename(&partial, file))

@@ -74,7 +74,11 @@ impl BridgeSpec {
     pub fn whereabouts(&self) -> String {
         let list = |e: &[Endpoint]| match e {
             [] => "nothing".to_owned(),
-            e => e.iter().map(Endpoint::as_str).collect::<Vec<_>>().join(", "),
+            e => e
+                .iter()
+                .map(Endpoint::as_str)
+                .collect::<Vec<_>>()
+                .join(", "),
         };
         format!(
             "listening on {}; connecting to {}",
@@ -102,7 +106,10 @@ impl BridgeSpec {
                     return Some(e.clone());
                 }
                 let taken = fixed(e.protocol());
-                let literal = e.host().trim_matches(['[', ']']).parse::<std::net::IpAddr>();
+                let literal = e
+                    .host()
+                    .trim_matches(['[', ']'])
+                    .parse::<std::net::IpAddr>();
                 locators
                     .iter()
                     .filter_map(|l| l.parse::<Endpoint>().ok())
@@ -129,7 +136,9 @@ impl BridgeSpec {
             .collect::<Option<_>>()?;
         let same = recorded.len() == self.listen.len()
             && self.listen.iter().zip(&recorded).all(|(e, r)| {
-                r.port() != 0 && (e.port() == 0 || e.port() == r.port()) && e.with_port(0) == r.with_port(0)
+                r.port() != 0
+                    && (e.port() == 0 || e.port() == r.port())
+                    && e.with_port(0) == r.with_port(0)
             });
         same.then_some(recorded)
     }
@@ -221,8 +230,16 @@ mod tests {
         assert_eq!(bound, ["tcp/127.0.0.1:7447", "tcp/localhost:40123"]);
         assert_eq!(spec.bound(&strings(&["tcp/127.0.0.1:7447"])), None);
 
-        let literal = BridgeSpec::new("a", "b", &[], &[], &strings(&["tls/[::1]:0"]), &[], Some(tls()))
-            .unwrap();
+        let literal = BridgeSpec::new(
+            "a",
+            "b",
+            &[],
+            &[],
+            &strings(&["tls/[::1]:0"]),
+            &[],
+            Some(tls()),
+        )
+        .unwrap();
         let bound = literal.bound(&strings(&["tls/10.0.0.1:5000", "tls/[::1]:5001"]));
         assert_eq!(bound, Some(vec!["tls/[::1]:5001".parse().unwrap()]));
     }

@@ -370,7 +370,10 @@ fn two_bridges_refused(
     let before = shm_files();
     let dir = TempDir::new(test);
     let authority = Authority::new(&dir.0, "mole-ca");
-    let (a_id, b_id) = (a_identity(&dir.0, &authority), b_identity(&dir.0, &authority));
+    let (a_id, b_id) = (
+        a_identity(&dir.0, &authority),
+        b_identity(&dir.0, &authority),
+    );
     let (a_ns, b_ns) = (
         unique_namespace(&format!("{test}-a")),
         unique_namespace(&format!("{test}-b")),
@@ -389,7 +392,11 @@ fn two_bridges_refused(
     b_args.extend(tls_flags(&authority.cert, &b_id));
     let b = Bridge::start(&dir.0, "b", &b_ns, &b_args);
 
-    let (from, to) = if a_sends { (&a_ns, &b_ns) } else { (&b_ns, &a_ns) };
+    let (from, to) = if a_sends {
+        (&a_ns, &b_ns)
+    } else {
+        (&b_ns, &a_ns)
+    };
     let receiver = join_realtime_stack(to, "test-planner");
     let mut goals = receiver
         .passive_subscriber(topics::OPERATOR_GOAL)
@@ -511,7 +518,9 @@ fn a_peer_without_a_certificate_is_refused() {
         "peer sent no certificates",
         &[
             ("the listener", &|| a.log().contains(LINK_UP)),
-            ("the peer without a certificate", &|| tokens.try_recv().is_ok()),
+            ("the peer without a certificate", &|| {
+                tokens.try_recv().is_ok()
+            }),
         ],
         || {
             anonymous
@@ -542,7 +551,14 @@ fn samples_leave_in_publication_order() {
     let listen = format!("tcp/{ANY_PORT}");
     let args = bridge_flags(
         &peer,
-        &["--out", "sensing/tactile", "--out", "sensing/odom", "--listen", &listen],
+        &[
+            "--out",
+            "sensing/tactile",
+            "--out",
+            "sensing/odom",
+            "--listen",
+            &listen,
+        ],
     );
     let mut bridge = Bridge::start(&dir.0, "bridge", &ns, &args);
     let endpoint = bridge.listening();
@@ -575,9 +591,8 @@ fn samples_leave_in_publication_order() {
     let _readings = peer_session
         .declare_subscriber(key_expr(&ns, "sensing/*"))
         .callback(move |sample| {
-            let header: Header = bytemuck::pod_read_unaligned(
-                &sample.payload().to_bytes()[..size_of::<Header>()],
-            );
+            let header: Header =
+                bytemuck::pod_read_unaligned(&sample.payload().to_bytes()[..size_of::<Header>()]);
             let topic = sample
                 .key_expr()
                 .as_str()
@@ -610,15 +625,30 @@ fn samples_leave_in_publication_order() {
     }
     // Across topics: the order they were published in (topic, step). Each topic's own
     // sequence numbers: 0, 1, 2, 3, none lost or repeated.
-    let order: Vec<(&str, u64)> = received.iter().map(|(t, tick, _)| (t.as_str(), *tick)).collect();
+    let order: Vec<(&str, u64)> = received
+        .iter()
+        .map(|(t, tick, _)| (t.as_str(), *tick))
+        .collect();
     assert_eq!(order, published, "not in publication order");
     for topic in [topics::SENSING_TACTILE.name, topics::SENSING_ODOM.name] {
-        let seqs: Vec<u64> = received.iter().filter(|(t, ..)| t == topic).map(|r| r.2).collect();
+        let seqs: Vec<u64> = received
+            .iter()
+            .filter(|(t, ..)| t == topic)
+            .map(|r| r.2)
+            .collect();
         assert_eq!(seqs, [0, 1, 2, 3], "{topic}: sequence numbers");
     }
 
     let pids = [bridge.pid];
-    drop((_readings, _token, peer_session, odom, tactile, sensing, bridge));
+    drop((
+        _readings,
+        _token,
+        peer_session,
+        odom,
+        tactile,
+        sensing,
+        bridge,
+    ));
     assert_eq!(ours_left_behind(&before, &pids), Vec::<String>::new());
 }
 
