@@ -98,14 +98,15 @@ mod tests {
         }
     }
 
-    fn topics(host: &Rc<RefCell<Host>>, n: usize) -> Vec<Box<FakeTopic>> {
+    /// `n` fake topics, boxed as the bridge's main boxes its topics of every message type.
+    fn topics(host: &Rc<RefCell<Host>>, n: usize) -> Vec<Box<dyn Outbound<Bytes = u64>>> {
         host.borrow_mut().queued = vec![VecDeque::new(); n];
         (0..n)
             .map(|index| {
                 Box::new(FakeTopic {
                     index,
                     host: host.clone(),
-                })
+                }) as Box<dyn Outbound<Bytes = u64>>
             })
             .collect()
     }
