@@ -8,52 +8,66 @@ use mole_types::{Truth, topics};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-/// The two halves' launch files for namespaces `onboard` and `offboard`, the on-board bridge
-/// listening on `port`; `bridge_backoff_ms`: how long a killed bridge stays down.
-fn split_files(
+/// Where the on-board bridge of the tests listens: any port the system gives, which it reports.
+const ANY_PORT: &str = "tcp/127.0.0.1:0";
+
+/// How long a half may take to say where its bridge listens (it builds the binaries first).
+const REPORT_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// One half's launch file (`onboard` or `offboard`) written to `dir`: its peer's namespace
+/// `peer`, its one endpoint `endpoint` (the on-board half listens on it, the off-board half
+/// connects to it); `bridge_backoff_ms`: how long a killed bridge stays down.
+fn half_file(
     dir: &Path,
-    onboard: &str,
-    offboard: &str,
-    port: u16,
+    half: &str,
+    peer: &str,
+    endpoint: &str,
     bridge_backoff_ms: u64,
-) -> (PathBuf, PathBuf) {
+) -> PathBuf {
     let split = workspace().join("launch/stacks/split");
-    let mut files = Vec::new();
-    for (name, peer_was, peer) in [
-        ("onboard", "offboard", offboard),
-        ("offboard", "onboard", onboard),
-    ] {
-        let text =
-            std::fs::read_to_string(split.join(format!("{name}.toml"))).expect("split launch file");
-        let text = text
-            .replace(
-                &format!("peer_namespace = \"{peer_was}\""),
-                &format!("peer_namespace = \"{peer}\""),
-            )
-            .replace("127.0.0.1:7447", &format!("127.0.0.1:{port}"))
-            // The bridge is the first process of both files.
-            .replacen(
-                "backoff_ms = 200,",
-                &format!("backoff_ms = {bridge_backoff_ms},"),
-                1,
-            );
-        let path = dir.join(format!("{name}.toml"));
-        std::fs::write(&path, text).expect("write launch file");
-        files.push(path);
-    }
-    (files.remove(0), files.remove(0))
+    let text =
+        std::fs::read_to_string(split.join(format!("{half}.toml"))).expect("split launch file");
+    let peer_was = if half == "onboard" {
+        "offboard"
+    } else {
+        "onboard"
+    };
+    let text = text
+        .replace(
+            &format!("peer_namespace = \"{peer_was}\""),
+            &format!("peer_namespace = \"{peer}\""),
+        )
+        .replace("tcp/127.0.0.1:7447", endpoint)
+        // The bridge is the first process of both files.
+        .replacen(
+            "backoff_ms = 200,",
+            &format!("backoff_ms = {bridge_backoff_ms},"),
+            1,
+        );
+    let path = dir.join(format!("{half}.toml"));
+    std::fs::write(&path, text).expect("write launch file");
+    path
 }
 
-/// A TCP port nobody listens on now.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
+/// `mole up FILE ARGS…` in `namespace`.
+fn start_half(namespace: &str, file: &Path, args: &[&str]) -> Stack {
+    let mut all = vec![file.to_str().expect("utf-8 path")];
+    all.extend(args);
+    Stack::start_in(namespace, &all)
 }
 
-/// Both halves, started the off-board one first (either order works: each bridge waits for
-/// the other).
+/// Where the on-board half's bridge listens, as it reports it.
+fn listening(onboard: &Stack) -> String {
+    bridge_listening(&onboard.out, REPORT_TIMEOUT).unwrap_or_else(|| {
+        panic!(
+            "the on-board bridge never said where it listens:\n{}",
+            logs(&onboard.out)
+        )
+    })
+}
+
+/// Both halves, the on-board one first: its bridge listens on port 0, and the off-board half
+/// connects to the port it reports.
 struct Split {
     onboard: Stack,
     offboard: Stack,
@@ -67,23 +81,11 @@ impl Split {
             unique_namespace(&format!("{test}-on")),
             unique_namespace(&format!("{test}-off")),
         );
-        let (on_file, off_file) =
-            split_files(&dir.0, &on_ns, &off_ns, free_port(), bridge_backoff_ms);
-        let with = |file: &Path| {
-            let mut all = vec![file.to_str().expect("utf-8 path").to_owned()];
-            all.extend(args.iter().map(|a| (*a).to_owned()));
-            all
-        };
-        let off_args = with(&off_file);
-        let offboard = Stack::start_in(
-            &off_ns,
-            &off_args.iter().map(String::as_str).collect::<Vec<_>>(),
-        );
-        let on_args = with(&on_file);
-        let onboard = Stack::start_in(
-            &on_ns,
-            &on_args.iter().map(String::as_str).collect::<Vec<_>>(),
-        );
+        let on_file = half_file(&dir.0, "onboard", &off_ns, ANY_PORT, bridge_backoff_ms);
+        let onboard = start_half(&on_ns, &on_file, args);
+        let endpoint = listening(&onboard);
+        let off_file = half_file(&dir.0, "offboard", &on_ns, &endpoint, bridge_backoff_ms);
+        let offboard = start_half(&off_ns, &off_file, args);
         Split {
             onboard,
             offboard,
@@ -332,4 +334,79 @@ fn killing_the_onboard_bridge_stops_the_robot_until_the_link_is_back() {
 #[test]
 fn killing_the_offboard_bridge_stops_the_robot_until_the_link_is_back() {
     a_killed_bridge_stops_the_robot_until_the_link_is_back(Side::OffBoard);
+}
+
+/// The off-board half started in a namespace the on-board half does not expect: each bridge
+/// sees the other's liveliness token, says so with both namespaces, and gives up after the same
+/// wait (`PEER_TIMEOUT`), so both `mole up` end with exit 2 (the bridge refused its input: the
+/// two launch files and namespaces do not meet), each naming what its bridge saw on the link.
+#[test]
+fn halves_whose_namespaces_do_not_meet_both_end_saying_what_they_see() {
+    let _serial = serial();
+    let before = shm_files();
+    let dir = TempDir::new("split-mismatch");
+    let on_ns = unique_namespace("split-mismatch-on");
+    // The namespace the on-board half expects, and the one the off-board half runs in.
+    let (expected, wrong) = (
+        unique_namespace("split-mismatch-off"),
+        unique_namespace("split-mismatch-wrong"),
+    );
+    let args = ["--mode", "realtime", "--ticks", "100000"];
+    let on_file = half_file(&dir.0, "onboard", &expected, ANY_PORT, 200);
+    let onboard = start_half(&on_ns, &on_file, &args);
+    let endpoint = listening(&onboard);
+    let off_file = half_file(&dir.0, "offboard", &on_ns, &endpoint, 200);
+    let offboard = start_half(&wrong, &off_file, &args);
+    let (on_out, off_out) = (onboard.out.clone(), offboard.out.clone());
+
+    // Against hanging only: both end on their own, on the bridges' deadline.
+    let on_output = onboard.wait(Duration::from_secs(120));
+    let off_output = offboard.wait(Duration::from_secs(120));
+    for (half, output, out, own, own_peer, seen, seen_peer) in [
+        (
+            "on board", &on_output, &on_out, &on_ns, &expected, &wrong, &on_ns,
+        ),
+        (
+            "off board",
+            &off_output,
+            &off_out,
+            &wrong,
+            &on_ns,
+            &on_ns,
+            &expected,
+        ),
+    ] {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(
+            output.status.code(),
+            Some(2),
+            "{half}:\n{stderr}\n{}",
+            logs(out)
+        );
+        for needle in [
+            format!(
+                "`bridge` refused its input: the peer's bridge did not come within {:?}",
+                mole_types::link::PEER_TIMEOUT
+            ),
+            // The bridge that gives up second saw the other leave.
+            format!("the bridge of namespace `{seen}` with peer_namespace `{seen_peer}`"),
+            format!("this half is namespace `{own}` with peer_namespace `{own_peer}`"),
+        ] {
+            assert!(
+                stderr.contains(&needle),
+                "{half}: no `{needle}` in:\n{stderr}"
+            );
+        }
+        let bridge_log = std::fs::read_to_string(out.join("logs/bridge.log")).unwrap_or_default();
+        let warning = format!("another bridge on the link: namespace `{seen}`");
+        assert!(
+            bridge_log.contains(&warning),
+            "{half}: the bridge did not say `{warning}` when it saw it:\n{bridge_log}"
+        );
+    }
+    assert_eq!(
+        left_behind(&before),
+        Vec::<String>::new(),
+        "shared memory left behind"
+    );
 }

@@ -562,10 +562,10 @@ fn validate_bridge(
         |list: &[Spanned<String>]| list.iter().map(|s| s.get_ref().clone()).collect::<Vec<_>>();
     let (listen, connect) = (texts(&raw.listen), texts(&raw.connect));
     if let Err(e) = link::endpoints(&listen, &connect, raw.tls.is_some()) {
-        let field = if matches!(e, LinkError::NoEndpoint) {
-            "listen"
-        } else {
-            "tls"
+        let field = match e {
+            LinkError::NoEndpoint | LinkError::PortZeroTwice(..) => "listen",
+            LinkError::ConnectPortZero(_) => "connect",
+            _ => "tls",
         };
         return Err(located(field, e));
     }

@@ -373,21 +373,32 @@ fn start(
     } = stack.plan;
     tracing::info!(namespace = %args.namespace, %mode, ticks, seed, "starting the stack");
     for index in order {
-        let dependencies = stack.plan.launch.processes[index].depends_on.clone();
-        for dependency in &dependencies {
-            wait_ready(&mut stack, dependency)?;
+        if let Err(failure) = start_process(&mut stack, index) {
+            // The processes already started are killed (the supervisor's drop) before they
+            // could clean up: what they leave in shared memory is swept.
+            drop(stack);
+            cleanup_dead_nodes();
+            return Err(failure);
         }
-        let process = &stack.plan.launch.processes[index];
-        let program = stack.plan.programs[&process.role].clone();
-        let mut spec = ChildSpec::from_process(process, program, log_of(args, &process.role));
-        let own = std::mem::take(&mut spec.env);
-        spec.env = stack.plan.env.iter().cloned().chain(own).collect();
-        stack
-            .supervisor
-            .spawn(spec)
-            .map_err(|e| Failure::run(e.to_string()))?;
     }
     Ok(stack)
+}
+
+/// Starts the process `index` of the launch file once those it depends on are ready.
+fn start_process(stack: &mut Stack<'_>, index: usize) -> Result<(), Failure> {
+    let dependencies = stack.plan.launch.processes[index].depends_on.clone();
+    for dependency in &dependencies {
+        wait_ready(stack, dependency)?;
+    }
+    let process = &stack.plan.launch.processes[index];
+    let program = stack.plan.programs[&process.role].clone();
+    let mut spec = ChildSpec::from_process(process, program, log_of(stack.args, &process.role));
+    let own = std::mem::take(&mut spec.env);
+    spec.env = stack.plan.env.iter().cloned().chain(own).collect();
+    stack
+        .supervisor
+        .spawn(spec)
+        .map_err(|e| Failure::run(e.to_string()))
 }
 
 /// The stack's settings as its processes take them.
@@ -1067,7 +1078,14 @@ pub(crate) fn last_error_line(log: &Path) -> String {
 
 /// Waits until `role` announced its ports (its first `stack/stats`).
 fn wait_ready(stack: &mut Stack<'_>, role: &str) -> Result<(), Failure> {
-    let deadline = Instant::now() + READY_TIMEOUT;
+    // A bridge waits up to PEER_TIMEOUT for the other half, then ends saying why: its reason,
+    // not this timeout, is the news.
+    let timeout = if role == mole_types::link::BRIDGE_ROLE {
+        mole_types::link::PEER_TIMEOUT + READY_TIMEOUT
+    } else {
+        READY_TIMEOUT
+    };
+    let deadline = Instant::now() + timeout;
     loop {
         let ready = &mut stack.watch.ready;
         stack.ports.stats.drain(|s| {
@@ -1086,7 +1104,7 @@ fn wait_ready(stack: &mut Stack<'_>, role: &str) -> Result<(), Failure> {
         }
         if Instant::now() > deadline {
             return Err(Failure::run(format!(
-                "`{role}` did not become ready within {READY_TIMEOUT:?}"
+                "`{role}` did not become ready within {timeout:?}"
             )));
         }
         std::thread::sleep(Duration::from_millis(10));

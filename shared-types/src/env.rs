@@ -30,7 +30,7 @@ env_vars! {
     ESTIMATOR = "MOLE_ESTIMATOR": "the estimator (localization, monitor)";
     PARTICLES = "MOLE_PARTICLES": "the particle filter's particle count, 1 to 1,000,000 (localization)";
     TOUCH_THRESHOLD = "MOLE_TOUCH_THRESHOLD": "the force (N) above which a tactile reading is a touch (mapping)";
-    OUT = "MOLE_OUT": "where summary.json and map.png go (monitor)";
+    OUT = "MOLE_OUT": "the run's output directory: summary.json and map.png (monitor), where the bridge listens (bridge)";
     TAKEOVER = "MOLE_TAKEOVER": "start from the last output of the process this one replaces (a swap)";
     RESUME = "MOLE_RESUME": "a directory with the last outputs of the process this one restarts after a crash (set by the launcher)";
 }

@@ -3,9 +3,20 @@
 //! and field), the bridge (`mole-bridge`) its command line.
 
 use crate::topics;
+use core::time::Duration;
 
 /// The bridge's role: a process of each half of a split stack, outside the graph.
 pub const BRIDGE_ROLE: &str = "bridge";
+
+/// How long a bridge waits for its peer's bridge when it starts; then it ends (exit 2) saying
+/// what it saw on the link. Both halves' bridges wait the same, so a mismatched pair ends on
+/// both sides.
+pub const PEER_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// The file, in the run's output directory, where a listening bridge writes the endpoints it
+/// listens on (one a line, port 0 replaced by the port it got), as the other half connects to
+/// them.
+pub const LISTENING_FILE: &str = "bridge-listening.txt";
 
 /// Topics each host keeps to itself: every launcher supervises its own processes.
 pub const PER_HOST: [&str; 2] = [topics::STACK_STATS.name, topics::STACK_PROCESSES.name];
@@ -17,6 +28,8 @@ pub enum LinkError {
     PerHost(String),
     BothWays(String),
     Endpoint(String),
+    ConnectPortZero(String),
+    PortZeroTwice(String, String),
     NoEndpoint,
     TlsMissing(String),
     TlsUnused,
@@ -44,6 +57,14 @@ impl core::fmt::Display for LinkError {
             LinkError::Endpoint(e) => {
                 write!(f, "endpoint `{e}`: expected tcp/HOST:PORT or tls/HOST:PORT")
             }
+            LinkError::ConnectPortZero(e) => write!(
+                f,
+                "endpoint `{e}`: port 0 is for listening (the bridge reports the port it got), expected the port the other half listens on"
+            ),
+            LinkError::PortZeroTwice(a, b) => write!(
+                f,
+                "endpoints `{a}` and `{b}` both listen on port 0, expected at most one (its port is reported: see {LISTENING_FILE})"
+            ),
             LinkError::NoEndpoint => {
                 write!(
                     f,
@@ -123,6 +144,37 @@ impl Endpoint {
     pub fn as_str(&self) -> &str {
         &self.0
     }
+
+    /// `tcp` or `tls`.
+    #[must_use]
+    pub fn protocol(&self) -> &str {
+        self.0.split_once('/').map_or("", |(protocol, _)| protocol)
+    }
+
+    /// The host: a name, an IPv4 address or a bracketed IPv6 one.
+    #[must_use]
+    pub fn host(&self) -> &str {
+        self.address().0
+    }
+
+    /// The port (0 when listening: any port the system gives).
+    #[must_use]
+    pub fn port(&self) -> u16 {
+        self.address().1
+    }
+
+    /// The same endpoint on `port`.
+    #[must_use]
+    pub fn with_port(&self, port: u16) -> Endpoint {
+        Endpoint(format!("{}/{}:{port}", self.protocol(), self.host()))
+    }
+
+    fn address(&self) -> (&str, u16) {
+        // Checked on parsing: `PROTOCOL/HOST:PORT`.
+        let address = self.0.split_once('/').map_or("", |(_, a)| a);
+        let (host, port) = address.rsplit_once(':').unwrap_or((address, "0"));
+        (host, port.parse().unwrap_or(0))
+    }
 }
 
 impl core::str::FromStr for Endpoint {
@@ -144,8 +196,9 @@ impl core::str::FromStr for Endpoint {
     }
 }
 
-/// Endpoints to listen on and connect to, checked: well formed, at least one, and TLS settings
-/// given exactly when some endpoint is `tls/`.
+/// Endpoints to listen on and connect to, checked: well formed, at least one, port 0 only to
+/// listen and on one endpoint at most, and TLS settings given exactly when some endpoint is
+/// `tls/`.
 pub fn endpoints(
     listen: &[String],
     connect: &[String],
@@ -157,6 +210,13 @@ pub fn endpoints(
     let (listen, connect) = (parse(listen)?, parse(connect)?);
     if listen.is_empty() && connect.is_empty() {
         return Err(LinkError::NoEndpoint);
+    }
+    if let Some(e) = connect.iter().find(|e| e.port() == 0) {
+        return Err(LinkError::ConnectPortZero(e.0.clone()));
+    }
+    let mut any_port = listen.iter().filter(|e| e.port() == 0);
+    if let (Some(a), Some(b)) = (any_port.next(), any_port.next()) {
+        return Err(LinkError::PortZeroTwice(a.0.clone(), b.0.clone()));
     }
     match (tls, listen.iter().chain(&connect).find(|e| e.is_tls())) {
         (false, Some(e)) => Err(LinkError::TlsMissing(e.0.clone())),
@@ -194,6 +254,14 @@ mod tests {
     }
 
     #[test]
+    fn an_endpoint_has_a_protocol_a_host_and_a_port() {
+        let e: Endpoint = "tls/[::1]:0".parse().unwrap();
+        assert_eq!((e.protocol(), e.host(), e.port()), ("tls", "[::1]", 0));
+        assert_eq!(e.with_port(40123).as_str(), "tls/[::1]:40123");
+        assert!(e.is_tls());
+    }
+
+    #[test]
     fn endpoints_are_checked() {
         for good in ["tcp/127.0.0.1:7447", "tls/robot.local:1", "tcp/[::1]:7447"] {
             assert!(good.parse::<Endpoint>().is_ok(), "{good}");
@@ -212,6 +280,18 @@ mod tests {
             );
         }
         assert_eq!(endpoints(&[], &[], false), Err(LinkError::NoEndpoint));
+        assert_eq!(
+            endpoints(&[], &strings(&["tcp/10.0.0.2:0"]), false),
+            Err(LinkError::ConnectPortZero("tcp/10.0.0.2:0".into()))
+        );
+        assert_eq!(
+            endpoints(&strings(&["tcp/127.0.0.1:0", "tcp/[::1]:0"]), &[], false),
+            Err(LinkError::PortZeroTwice(
+                "tcp/127.0.0.1:0".into(),
+                "tcp/[::1]:0".into()
+            ))
+        );
+        assert!(endpoints(&strings(&["tcp/127.0.0.1:0", "tcp/[::1]:7447"]), &[], false).is_ok());
         assert_eq!(
             endpoints(&strings(&["tls/127.0.0.1:7447"]), &[], false),
             Err(LinkError::TlsMissing("tls/127.0.0.1:7447".into()))

@@ -79,7 +79,9 @@ impl Drop for TempDir {
 }
 
 /// iceoryx2's files: shared memory in /dev/shm and its node and service records in
-/// /tmp/iceoryx2, by path.
+/// /tmp/iceoryx2, by path. Not its global node counter (`…_node.<version>.global_mgmt`): the
+/// first node on a machine makes it and iceoryx2 keeps it for good, by design, so a test that
+/// makes the first node (in a fresh /dev/shm) would see it as left behind.
 pub fn shm_files() -> Vec<String> {
     let mut names = Vec::new();
     for dir in ["/dev/shm", "/tmp/iceoryx2/nodes", "/tmp/iceoryx2/services"] {
@@ -293,6 +295,23 @@ pub fn without_colours(text: &str) -> String {
         }
     }
     out
+}
+
+/// The first endpoint a bridge listens on, once it wrote them (port 0 replaced by the port it
+/// got) to [`mole_types::link::LISTENING_FILE`] in its output directory `out`; `None` if it
+/// has not within `timeout`.
+pub fn bridge_listening(out: &Path, timeout: Duration) -> Option<String> {
+    let file = out.join(mole_types::link::LISTENING_FILE);
+    let deadline = Instant::now() + timeout;
+    loop {
+        let first = std::fs::read_to_string(&file)
+            .ok()
+            .and_then(|text| text.lines().next().map(str::to_owned));
+        if first.is_some() || Instant::now() > deadline {
+            return first;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// Every process log of a run, for failure messages.

@@ -553,6 +553,16 @@ fn bad_bridge_tables_name_the_field() {
             "no TLS certificate",
         ),
         (
+            "peer_namespace = \"b\"\nconnect = [\"tcp/10.0.0.2:0\"]",
+            "bridge.connect",
+            "port 0 is for listening",
+        ),
+        (
+            "peer_namespace = \"b\"\nlisten = [\"tcp/127.0.0.1:0\", \"tcp/[::1]:0\"]",
+            "bridge.listen",
+            "expected at most one",
+        ),
+        (
             "peer_namespace = \"\"\nlisten = [\"tcp/127.0.0.1:7447\"]",
             "bridge.peer_namespace",
             "expected the namespace",

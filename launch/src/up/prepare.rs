@@ -263,7 +263,8 @@ fn prepare_out_dir(out: &Path) -> Result<(), Failure> {
         ))
     };
     std::fs::create_dir_all(out.join("logs")).map_err(failed)?;
-    for stale in ["summary.json", "map.png"] {
+    // The bridge's report of where it listens, which a restarted bridge of this run reuses.
+    for stale in ["summary.json", "map.png", mole_types::link::LISTENING_FILE] {
         let path = out.join(stale);
         if path.exists() {
             std::fs::remove_file(&path).map_err(failed)?;

@@ -5,21 +5,27 @@
 //!      message's layout attached; a topic with history also answers queries with its newest.
 //! in:  zenoh subscriber on `mole/<peer>/<topic>` → one inbox in arrival order (zenoh's thread
 //!      rings this node's doorbell) → checked ([`Forwarding`]) → mole publisher here.
-//! link: a liveliness token `mole/<ns>/bridge`; the peer's going and coming back is reported,
-//!      and on its return the topics with history are asked for again.
+//! link: a liveliness token `mole/<ns>/bridge/<peer>` ([`LinkWatch`]); the peer's going and
+//!      coming back is reported, and on its return the topics with history are asked for again;
+//!      a bridge of other namespaces on the link is reported with both.
 //!
 //! Ready (its first statistics, which the launcher waits for) only once the peer is there, so
-//! a stack whose world depends on its bridge starts stepping with both halves listening.
+//! a stack whose world depends on its bridge starts stepping with both halves listening; a peer
+//! not there within [`PEER_TIMEOUT`] ends the bridge (exit 2) with what it saw on the link.
+//! Where it listens (port 0: the port it got) is logged and written to [`LISTENING_FILE`] in
+//! the run's output directory; a restart listens there again.
 
 use clap::Parser;
 use mole_bridge::{
-    BridgeSpec, Delivery, Entry, Forward, Forwarding, Tls, delivery, descriptor, key_expr,
+    BridgeSpec, Delivery, Entry, Forward, Forwarding, LISTENING, LinkChange, LinkWatch, Outbound,
+    Staged, Tls, delivery, descriptor, every_link_token, key_expr, send_in_order,
 };
 use mole_runtime::{BadInput, CommonArgs, Context, Publisher, Ringer, Subscriber};
 use mole_runtime::{Wake, Waker, layout_mismatch};
+use mole_types::link::{LISTENING_FILE, PEER_TIMEOUT};
 use mole_types::topics::{self, TopicVisitor};
-use mole_types::{Message, Topic};
-use std::path::PathBuf;
+use mole_types::{Message, Topic, env};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -66,6 +72,9 @@ struct Args {
     /// TLS: this side's private key (PEM).
     #[arg(long, requires = "tls_root_ca")]
     tls_key: Option<PathBuf>,
+    /// The run's output directory: where it listens is written there (bridge-listening.txt).
+    #[arg(long = "out-dir", env = env::OUT)]
+    out_dir: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -73,23 +82,28 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), Failed> {
-    let spec = spec_of(args)?;
+    let mut spec = spec_of(args)?;
+    let listening = args.out_dir.as_ref().map(|out| out.join(LISTENING_FILE));
+    if let Some(again) = listening
+        .as_deref()
+        .and_then(|file| listen_again(&spec, file))
+    {
+        spec.listen = again;
+    }
     let mut ctx = Context::new(ROLE, &args.common)?;
     let config = zenoh::Config::from_json5(&spec.zenoh_config().to_string())
         .map_err(|e| BadInput(format!("zenoh configuration: {e}")))?;
     let session = zenoh::open(config)
         .wait()
         .map_err(|e| BadInput(format!("cannot open the zenoh session: {e}")))?;
+    report_listening(&session, &mut spec, listening.as_deref())?;
     let ringer = ctx.ringer()?;
     let wake = ringer.clone();
     let inbox = Arc::new(Inbox::new(move || wake.ring()));
-    let link = Link::watch(&session, &spec.peer_namespace, &ringer)?;
+    let link = Link::watch(&session, &spec, &ringer)?;
     let mut outs = open_outs(&ctx, &session, &spec)?;
     let mut ins = open_ins(&ctx, &session, &spec, &inbox)?;
-    let _token = session
-        .liveliness()
-        .declare_token(key_expr(&spec.namespace, ROLE))
-        .wait()?;
+    let _token = session.liveliness().declare_token(link.own_key()).wait()?;
     tracing::info!(
         peer = %spec.peer_namespace,
         listen = ?spec.listen.iter().map(|e| e.as_str()).collect::<Vec<_>>(),
@@ -97,7 +111,7 @@ fn run(args: &Args) -> Result<(), Failed> {
         out = ?spec.out, inbound = ?spec.inbound,
         "waiting for the peer's bridge"
     );
-    if !link.wait_for_peer(&ctx) {
+    if !link.wait_for_peer(&ctx, &spec)? {
         return Ok(());
     }
     ask_history(&session, &spec.peer_namespace, &ins, &inbox);
@@ -119,6 +133,70 @@ fn run(args: &Args) -> Result<(), Failed> {
             ins[entry.topic].forward(&entry.item, entry.history)?;
         }
     }
+}
+
+/// A restarted bridge's endpoints: where its first start listened (its port 0 resolved), read
+/// from `file`, so the other half finds it there again.
+fn listen_again(spec: &BridgeSpec, file: &Path) -> Option<Vec<mole_types::link::Endpoint>> {
+    if spec.listen.iter().all(|e| e.port() != 0) {
+        return None;
+    }
+    let recorded = std::fs::read_to_string(file).ok()?;
+    let again = spec.listening_again(&recorded);
+    match &again {
+        Some(_) => tracing::info!(
+            file = %file.display(),
+            "listening again where the first start of this run did"
+        ),
+        None => tracing::warn!(
+            file = %file.display(),
+            "not the endpoints of this bridge: listening as configured"
+        ),
+    }
+    again
+}
+
+/// Logs where the session listens (port 0 replaced by the port zenoh bound), one
+/// "listening on ENDPOINT" line each, and writes them to `file`, one a line, for the other
+/// half (replaced whole: a reader never sees half of it).
+fn report_listening(
+    session: &zenoh::Session,
+    spec: &mut BridgeSpec,
+    file: Option<&Path>,
+) -> Result<(), Failed> {
+    if spec.listen.is_empty() {
+        return Ok(());
+    }
+    let locators: Vec<String> = session
+        .info()
+        .locators()
+        .wait()
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    let bound = spec.bound(&locators).ok_or_else(|| {
+        BadInput(format!(
+            "cannot tell which port zenoh bound for {}: it listens on {}",
+            spec.whereabouts(),
+            locators.join(", ")
+        ))
+    })?;
+    for endpoint in &bound {
+        tracing::info!("{LISTENING} {}", endpoint.as_str());
+    }
+    spec.listen = bound;
+    if let Some(file) = file {
+        let text: String = spec
+            .listen
+            .iter()
+            .map(|e| format!("{}\n", e.as_str()))
+            .collect();
+        let partial = file.with_extension("partial");
+        std::fs::write(&partial, text)
+            .and_then(|()| std::fs::rename(&partial, file))
+            .map_err(|e| BadInput(format!("cannot write {}: {e}", file.display())))?;
+    }
+    Ok(())
 }
 
 /// The checked settings; a bad one is the launch file's (exit 2).
@@ -157,43 +235,10 @@ fn spec_of(args: &Args) -> Result<BridgeSpec, BadInput> {
 // ---------------------------------------------------------------------------------------------
 // Out: this host's topics to the peer.
 
-/// A topic sent to the peer, whatever its message type.
-trait Out {
+/// A topic sent to the peer, whatever its message type: it wakes the bridge, and its samples
+/// leave in publication order ([`send_in_order`]).
+trait Out: Outbound<Bytes = ZBytes> {
     fn waker(&self) -> Waker;
-    /// Takes every new sample into `staged`, marked with `index` (this topic's).
-    fn collect(&mut self, index: usize, staged: &mut Vec<Staged>);
-    /// Sends one sample it collected.
-    fn send(&mut self, bytes: ZBytes);
-}
-
-/// A sample taken from a topic here, waiting to be sent in publication order.
-struct Staged {
-    stamp_ns: u64,
-    topic: usize,
-    bytes: ZBytes,
-}
-
-/// Sends every new sample of every topic out, in the order they were published here.
-///
-/// One machine's processes rely on that order: sensing publishes odometry last, so a process
-/// woken by it finds the step's other readings in (docs/architecture.md), and an input that
-/// does not wake its process must not arrive after the one that does. Draining the topics one
-/// by one would break it (a topic looked at before its sample came, the next one after), so the
-/// samples are gathered until a pass finds nothing new and sent by their publication stamps.
-fn send_in_order(outs: &mut [Box<dyn Out>], staged: &mut Vec<Staged>) {
-    loop {
-        let before = staged.len();
-        for (index, out) in outs.iter_mut().enumerate() {
-            out.collect(index, staged);
-        }
-        if staged.len() == before {
-            break;
-        }
-    }
-    staged.sort_by_key(|s| s.stamp_ns);
-    for sample in staged.drain(..) {
-        outs[sample.topic].send(sample.bytes);
-    }
 }
 
 struct TypedOut<M: Message> {
@@ -211,11 +256,15 @@ impl<M: Message> Out for TypedOut<M> {
     fn waker(&self) -> Waker {
         self.subscriber.waker()
     }
-    fn collect(&mut self, index: usize, staged: &mut Vec<Staged>) {
+}
+
+impl<M: Message> Outbound for TypedOut<M> {
+    type Bytes = ZBytes;
+    fn collect(&mut self, topic: usize, staged: &mut Vec<Staged<ZBytes>>) {
         self.subscriber.drain(|message| {
             staged.push(Staged {
                 stamp_ns: message.header().stamp_ns,
-                topic: index,
+                topic,
                 // The one copy: the network needs bytes of its own.
                 bytes: ZBytes::from(bytemuck::bytes_of(message).to_vec()),
             });
@@ -505,46 +554,38 @@ fn ask_history(session: &zenoh::Session, peer: &str, ins: &[Box<dyn In>], inbox:
 // ---------------------------------------------------------------------------------------------
 // The link: is the peer's bridge there?
 
-/// The peer's liveliness token, watched: each arrival and departure is reported.
+/// The bridges' liveliness tokens, watched ([`LinkWatch`]): the peer's arrivals and departures
+/// are reported, and any other bridge on the link with both namespaces.
 struct Link {
-    state: Arc<Mutex<LinkState>>,
+    state: Arc<Mutex<LinkWatch>>,
     _watch: zenoh::pubsub::Subscriber<()>,
 }
 
-#[derive(Default)]
-struct LinkState {
-    up: bool,
-    /// The peer came (back) since the bridge last asked for history.
-    arrived: bool,
-    losses: u64,
-}
-
 impl Link {
-    fn watch(session: &zenoh::Session, peer: &str, ringer: &Ringer) -> Result<Link, Failed> {
-        let state: Arc<Mutex<LinkState>> = Arc::default();
-        let (seen, ringer, peer) = (state.clone(), ringer.clone(), peer.to_owned());
+    fn watch(session: &zenoh::Session, spec: &BridgeSpec, ringer: &Ringer) -> Result<Link, Failed> {
+        let state = Arc::new(Mutex::new(LinkWatch::new(
+            &spec.namespace,
+            &spec.peer_namespace,
+        )));
+        let (seen, ringer, peer) = (state.clone(), ringer.clone(), spec.peer_namespace.clone());
         let watch = session
             .liveliness()
-            .declare_subscriber(key_expr(&peer, ROLE))
+            .declare_subscriber(every_link_token())
             .history(true)
             .callback(move |sample| {
                 let mut state = seen.lock().unwrap_or_else(|e| e.into_inner());
-                match sample.kind() {
-                    SampleKind::Put if !state.up => {
-                        state.up = true;
-                        state.arrived = true;
-                        tracing::info!(peer, "link up: the peer's bridge is there");
+                let alive = sample.kind() == SampleKind::Put;
+                match state.saw(sample.key_expr().as_str(), alive) {
+                    LinkChange::Up => tracing::info!(peer, "link up: the peer's bridge is there"),
+                    LinkChange::Down { losses } => tracing::warn!(
+                        peer,
+                        losses,
+                        "link down: the peer's bridge is gone; its topics stop here until it is back"
+                    ),
+                    LinkChange::Stranger(stranger) => {
+                        tracing::warn!("{}", state.stranger_warning(&stranger));
                     }
-                    SampleKind::Delete if state.up => {
-                        state.up = false;
-                        state.losses += 1;
-                        tracing::warn!(
-                            peer,
-                            losses = state.losses,
-                            "link down: the peer's bridge is gone; its topics stop here until it is back"
-                        );
-                    }
-                    _ => {}
+                    LinkChange::Nothing => {}
                 }
                 drop(state);
                 ringer.ring();
@@ -556,12 +597,27 @@ impl Link {
         })
     }
 
-    /// Waits until the peer's bridge is there; false on a shutdown.
-    fn wait_for_peer(&self, ctx: &Context) -> bool {
+    fn state(&self) -> std::sync::MutexGuard<'_, LinkWatch> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// This bridge's own token's key.
+    fn own_key(&self) -> String {
+        self.state().own().key()
+    }
+
+    /// Waits until the peer's bridge is there; false on a shutdown, an error (the launch
+    /// files' namespaces or endpoints do not meet: exit 2) saying what is on the link if the
+    /// peer is not there within [`PEER_TIMEOUT`].
+    fn wait_for_peer(&self, ctx: &Context, spec: &BridgeSpec) -> Result<bool, BadInput> {
+        let started = Instant::now();
         let mut said = Instant::now();
-        while !self.state.lock().unwrap_or_else(|e| e.into_inner()).up {
+        while !self.state().is_up() {
             if ctx.shutdown_requested() {
-                return false;
+                return Ok(false);
+            }
+            if started.elapsed() > PEER_TIMEOUT {
+                return Err(BadInput(self.state().gave_up(&spec.whereabouts())));
             }
             if said.elapsed() > Duration::from_secs(5) {
                 tracing::info!("still waiting for the peer's bridge");
@@ -570,11 +626,11 @@ impl Link {
             std::thread::sleep(Duration::from_millis(10));
         }
         self.came_back();
-        true
+        Ok(true)
     }
 
     /// Whether the peer came back since the last call.
     fn came_back(&self) -> bool {
-        std::mem::take(&mut self.state.lock().unwrap_or_else(|e| e.into_inner()).arrived)
+        self.state().came_back()
     }
 }

@@ -13,6 +13,10 @@ pub fn key_expr(namespace: &str, topic: &str) -> String {
     topics::service_name(namespace, topic)
 }
 
+/// What a listening bridge logs before each endpoint it listens on (port 0 replaced by the
+/// port it got): "listening on tcp/127.0.0.1:40123".
+pub const LISTENING: &str = "listening on";
+
 /// TLS: the certificate authority both sides trust, and this side's certificate and key (used
 /// to listen and to connect; each side checks the other's: mutual TLS).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -63,6 +67,80 @@ impl BridgeSpec {
             connect,
             tls,
         })
+    }
+
+    /// Where the bridge looks for its peer, as a phrase: "listening on …; connecting to …".
+    #[must_use]
+    pub fn whereabouts(&self) -> String {
+        let list = |e: &[Endpoint]| match e {
+            [] => "nothing".to_owned(),
+            e => e
+                .iter()
+                .map(Endpoint::as_str)
+                .collect::<Vec<_>>()
+                .join(", "),
+        };
+        format!(
+            "listening on {}; connecting to {}",
+            list(&self.listen),
+            list(&self.connect)
+        )
+    }
+
+    /// The endpoints listened on, port 0 replaced by the port zenoh bound: `locators` are the
+    /// session's (`tcp/127.0.0.1:40123`, a host name resolved, an unspecified host expanded to
+    /// each interface). `None` if no locator answers an endpoint of port 0.
+    #[must_use]
+    pub fn bound(&self, locators: &[String]) -> Option<Vec<Endpoint>> {
+        let fixed = |protocol: &str| -> Vec<u16> {
+            self.listen
+                .iter()
+                .filter(|e| e.protocol() == protocol && e.port() != 0)
+                .map(Endpoint::port)
+                .collect()
+        };
+        self.listen
+            .iter()
+            .map(|e| {
+                if e.port() != 0 {
+                    return Some(e.clone());
+                }
+                let taken = fixed(e.protocol());
+                let literal = e
+                    .host()
+                    .trim_matches(['[', ']'])
+                    .parse::<std::net::IpAddr>();
+                locators
+                    .iter()
+                    .filter_map(|l| l.parse::<Endpoint>().ok())
+                    .filter(|l| l.protocol() == e.protocol() && !taken.contains(&l.port()))
+                    .find(|l| match &literal {
+                        Ok(ip) if !ip.is_unspecified() => l.host() == e.host(),
+                        _ => true,
+                    })
+                    .map(|l| e.with_port(l.port()))
+            })
+            .collect()
+    }
+
+    /// The endpoints to listen on again after a restart, from what the first start wrote
+    /// (`recorded`, one endpoint a line: [`BridgeSpec::bound`]), so the other half, which
+    /// connects to the port the first start got, finds this one there. `None` if the record is
+    /// not of these endpoints.
+    #[must_use]
+    pub fn listening_again(&self, recorded: &str) -> Option<Vec<Endpoint>> {
+        let recorded: Vec<Endpoint> = recorded
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| l.trim().parse().ok())
+            .collect::<Option<_>>()?;
+        let same = recorded.len() == self.listen.len()
+            && self.listen.iter().zip(&recorded).all(|(e, r)| {
+                r.port() != 0
+                    && (e.port() == 0 || e.port() == r.port())
+                    && e.with_port(0) == r.with_port(0)
+            });
+        same.then_some(recorded)
     }
 
     /// The zenoh session's configuration: a peer that listens only on the endpoints given (none
@@ -135,12 +213,74 @@ mod tests {
     }
 
     #[test]
-    fn tls_requires_the_peers_certificate() {
-        let tls = Tls {
+    fn port_zero_is_reported_as_the_port_zenoh_bound() {
+        let spec = BridgeSpec::new(
+            "a",
+            "b",
+            &[],
+            &[],
+            &strings(&["tcp/127.0.0.1:7447", "tcp/localhost:0"]),
+            &[],
+            None,
+        )
+        .unwrap();
+        let locators = strings(&["tcp/127.0.0.1:7447", "tcp/127.0.0.1:40123"]);
+        let bound = spec.bound(&locators).expect("both bound");
+        let bound: Vec<&str> = bound.iter().map(Endpoint::as_str).collect();
+        assert_eq!(bound, ["tcp/127.0.0.1:7447", "tcp/localhost:40123"]);
+        assert_eq!(spec.bound(&strings(&["tcp/127.0.0.1:7447"])), None);
+
+        let literal = BridgeSpec::new(
+            "a",
+            "b",
+            &[],
+            &[],
+            &strings(&["tls/[::1]:0"]),
+            &[],
+            Some(tls()),
+        )
+        .unwrap();
+        let bound = literal.bound(&strings(&["tls/10.0.0.1:5000", "tls/[::1]:5001"]));
+        assert_eq!(bound, Some(vec!["tls/[::1]:5001".parse().unwrap()]));
+    }
+
+    #[test]
+    fn a_restart_listens_again_where_the_first_start_did() {
+        let spec = BridgeSpec::new(
+            "a",
+            "b",
+            &[],
+            &[],
+            &strings(&["tcp/127.0.0.1:7447", "tcp/localhost:0"]),
+            &[],
+            None,
+        )
+        .unwrap();
+        let again = spec
+            .listening_again("tcp/127.0.0.1:7447\ntcp/localhost:40123\n")
+            .expect("the first start's record");
+        assert_eq!(again[1].as_str(), "tcp/localhost:40123");
+        for foreign in [
+            "tcp/127.0.0.1:7447\n",
+            "tcp/127.0.0.1:7447\ntcp/10.0.0.1:40123\n",
+            "tcp/127.0.0.1:7448\ntcp/localhost:40123\n",
+            "tcp/127.0.0.1:7447\ntcp/localhost:0\n",
+            "not an endpoint\n",
+        ] {
+            assert_eq!(spec.listening_again(foreign), None, "{foreign}");
+        }
+    }
+
+    fn tls() -> Tls {
+        Tls {
             root_ca: "ca.pem".into(),
             cert: "me.pem".into(),
             key: "me.key".into(),
-        };
+        }
+    }
+
+    #[test]
+    fn tls_requires_the_peers_certificate() {
         let spec = BridgeSpec::new(
             "a",
             "b",
@@ -148,7 +288,7 @@ mod tests {
             &[],
             &strings(&["tls/127.0.0.1:7447"]),
             &[],
-            Some(tls),
+            Some(tls()),
         )
         .unwrap();
         let tls = &spec.zenoh_config()["transport"]["link"]["tls"];

@@ -127,12 +127,16 @@ impl Drop for EchoChild {
 /// Measures latency per size and throughput at the largest, returns the report.
 fn bench(args: &Args) -> Result<serde_json::Value, Failed> {
     validate(args)?;
-    let port = std::net::TcpListener::bind("127.0.0.1:0")?
-        .local_addr()?
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
     let prefix = format!("mole-bench/zenoh/{}", std::process::id());
-    let session = open_session(&[&endpoint], &[])?;
+    // Any free port: the echo connects to the one zenoh bound.
+    let session = open_session(&["tcp/127.0.0.1:0"], &[])?;
+    let endpoint = session
+        .info()
+        .locators()
+        .wait()
+        .first()
+        .map(ToString::to_string)
+        .ok_or("the session listens nowhere")?;
     let ping = publisher(&session, format!("{prefix}/ping"))?;
     let pong = session
         .declare_subscriber(format!("{prefix}/pong"))
