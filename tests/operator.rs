@@ -2,12 +2,10 @@
 //! as the view would: a goal redirects a goal-seeking planner; pause, step and run pace the world.
 
 use mole_integration_tests::*;
-use mole_runtime::{ClockMode, Context, Publisher, Subscriber};
-use mole_types::{
-    Goal, PACE_PAUSE, PACE_RUN, PACE_STEP, Pace, PlanStatus, Role, STATUS_HAS_GOAL, Truth, topics,
-};
+use mole_runtime::ClockMode;
+use mole_types::{PACE_PAUSE, PACE_RUN, PACE_STEP, Role, STATUS_HAS_GOAL, Truth};
 use std::collections::BTreeSet;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The launcher ends a lockstep run that makes no step for 15 s (`STALL_TIMEOUT`) and restarts
 /// a process silent for 5 s (`HANG_TIMEOUT`); a pause must outlast both.
