@@ -31,16 +31,23 @@ fn help_lists_every_subcommand() {
     assert_eq!(
         listed_subcommands(&[]),
         [
-            "up", "swap", "stop", "status", "top", "record", "replay", "view", "info", "export",
-            "bench", "help"
+            "up", "swap", "stop", "status", "fault", "top", "record", "replay", "view", "info",
+            "export", "bench", "help"
         ]
     );
     assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
+    assert_eq!(
+        listed_subcommands(&["fault"]),
+        ["kill", "stop", "delay", "drop", "corrupt", "chaos", "help"]
+    );
     for command in [
         &["up"][..],
         &["swap"],
         &["stop"],
         &["status"],
+        &["fault"],
+        &["fault", "kill"],
+        &["fault", "chaos"],
         &["top"],
         &["record"],
         &["replay"],
