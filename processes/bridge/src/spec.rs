@@ -185,6 +185,11 @@ mod tests {
         list.iter().map(|s| (*s).to_owned()).collect()
     }
 
+    /// A bridge of robot `a` to `b` that only listens, on `endpoints`.
+    fn listening_on(endpoints: &[&str], tls: Option<Tls>) -> BridgeSpec {
+        BridgeSpec::new("a", "b", &[], &[], &strings(endpoints), &[], tls).unwrap()
+    }
+
     #[test]
     fn keys_are_the_service_names() {
         assert_eq!(key_expr("robot", "sensing/scan"), "mole/robot/sensing/scan");
@@ -214,16 +219,7 @@ mod tests {
 
     #[test]
     fn port_zero_is_reported_as_the_port_zenoh_bound() {
-        let spec = BridgeSpec::new(
-            "a",
-            "b",
-            &[],
-            &[],
-            &strings(&["tcp/127.0.0.1:7447", "tcp/localhost:0"]),
-            &[],
-            None,
-        )
-        .unwrap();
+        let spec = listening_on(&["tcp/127.0.0.1:7447", "tcp/localhost:0"], None);
         let locators = strings(&["tcp/127.0.0.1:7447", "tcp/127.0.0.1:40123"]);
         let bound = spec.bound(&locators).expect("both bound");
         let bound: Vec<&str> = bound.iter().map(Endpoint::as_str).collect();
@@ -246,16 +242,7 @@ mod tests {
 
     #[test]
     fn a_restart_listens_again_where_the_first_start_did() {
-        let spec = BridgeSpec::new(
-            "a",
-            "b",
-            &[],
-            &[],
-            &strings(&["tcp/127.0.0.1:7447", "tcp/localhost:0"]),
-            &[],
-            None,
-        )
-        .unwrap();
+        let spec = listening_on(&["tcp/127.0.0.1:7447", "tcp/localhost:0"], None);
         let again = spec
             .listening_again("tcp/127.0.0.1:7447\ntcp/localhost:40123\n")
             .expect("the first start's record");
@@ -281,16 +268,7 @@ mod tests {
 
     #[test]
     fn tls_requires_the_peers_certificate() {
-        let spec = BridgeSpec::new(
-            "a",
-            "b",
-            &[],
-            &[],
-            &strings(&["tls/127.0.0.1:7447"]),
-            &[],
-            Some(tls()),
-        )
-        .unwrap();
+        let spec = listening_on(&["tls/127.0.0.1:7447"], Some(tls()));
         let tls = &spec.zenoh_config()["transport"]["link"]["tls"];
         assert_eq!(tls["enable_mtls"], true);
         assert_eq!(tls["root_ca_certificate"], "ca.pem");
