@@ -1,7 +1,7 @@
 //! The loop of an observer (the monitor, a viewer): it reads every sample of its inputs, in
 //! order, at its own pace, and does something periodically.
 
-use crate::step::{In, Process, Start, start_once};
+use crate::step::{In, Process, Start, follow_map};
 use crate::waitset::Wake;
 use mole_types::Message;
 use std::time::{Duration, Instant};
@@ -79,9 +79,7 @@ impl Process {
         let mut deadline = next_periodic;
         loop {
             let wake = waitset.wait(&mut self.ctx, Some(deadline))?;
-            if state.is_none() {
-                state = start_once(&self.ctx, &mut self.map, &mut init)?;
-            }
+            follow_map(&self.ctx, &mut self.map, &mut init, &mut state)?;
             let Some(state) = state.as_mut() else {
                 self.discard_inputs();
                 if wake == Wake::Shutdown {

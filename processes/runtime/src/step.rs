@@ -508,9 +508,7 @@ impl Process {
             if waitset.wait(&mut self.ctx, None)? == Wake::Shutdown {
                 return Ok(());
             }
-            if state.is_none() {
-                state = start_once(&self.ctx, &mut self.map, &mut init)?;
-            }
+            follow_map(&self.ctx, &mut self.map, &mut init, &mut state)?;
             let Some(state) = state.as_mut() else {
                 self.discard_inputs();
                 continue;
@@ -579,27 +577,41 @@ impl Process {
     }
 }
 
-/// Runs `init` once the world's map is in (every process but the clock starts from it); the
-/// state it built, or `None` while the map has not come.
-pub(crate) fn start_once<S>(
+/// Runs `init` once the world's map is in (every process but the clock starts from it), into
+/// `state`. After that it takes each map the world publishes again (a restarted world sends its
+/// map once more): left in the queue, that sample would end every wait at once, and in lockstep
+/// keep the wait from offering history to a process restarted later, which then never got the
+/// step it waited for (a chaos session stalled so: the world restarted, later mapping and
+/// planning).
+pub(crate) fn follow_map<S>(
     ctx: &Context,
     map: &mut Subscriber<WorldMap>,
     init: &mut Option<impl FnOnce(&Start) -> Result<S, BoxError>>,
-) -> Result<Option<S>, BoxError> {
+    state: &mut Option<S>,
+) -> Result<(), BoxError> {
+    if state.is_some() {
+        if map.drain(|_| {}) > 0 {
+            tracing::info!(
+                role = ctx.role(),
+                "the world published its map again (it restarted): going on with the one we have"
+            );
+        }
+        return Ok(());
+    }
     if !map.update() {
-        return Ok(None);
+        return Ok(());
     }
     let (Some(world), Some(init)) = (map.latest(), init.take()) else {
-        return Ok(None);
+        return Ok(());
     };
     let start = Start {
         map: world,
         seed: ctx.seed().unwrap_or(world.seed),
         mode: ctx.mode(),
     };
-    let state = init(&start)?;
+    *state = Some(init(&start)?);
     tracing::info!(role = ctx.role(), "map received");
-    Ok(Some(state))
+    Ok(())
 }
 
 /// What the gate decided for the trigger's tick.

@@ -208,6 +208,10 @@ impl WaitSet {
                         "a sample came without its wake-up signal; found by looking (warned once)"
                     );
                 }
+                // Idle as on the deadline: a sample left queued must not starve the offer.
+                if ctx.mode() == ClockMode::Lockstep {
+                    ctx.offer_history();
+                }
                 return Ok(Wake::Data);
             }
         }
