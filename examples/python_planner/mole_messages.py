@@ -261,10 +261,13 @@ _check(Tactile, 552, 8, [0, 32, 36, 40])
 
 
 class Odom(ctypes.Structure):
-    """`mole.Odom.v1`: 56 bytes, alignment 8."""
+    """`mole.Odom.v2`: 80 bytes, alignment 8."""
 
     _fields_ = [
         ("header", Header),
+        ("x", ctypes.c_double),
+        ("y", ctypes.c_double),
+        ("theta", ctypes.c_double),
         ("v", ctypes.c_double),
         ("omega", ctypes.c_double),
         ("dt", ctypes.c_double),
@@ -272,10 +275,10 @@ class Odom(ctypes.Structure):
 
     @classmethod
     def type_name(cls) -> str:
-        return "mole.Odom.v1"
+        return "mole.Odom.v2"
 
 
-_check(Odom, 56, 8, [0, 32, 40, 48])
+_check(Odom, 80, 8, [0, 32, 40, 48, 56, 64, 72])
 
 
 class BeaconReading(ctypes.Structure):
@@ -335,7 +338,7 @@ _check(Fix, 64, 8, [0, 32, 40, 48, 56, 60])
 
 
 class Pose(ctypes.Structure):
-    """`mole.Pose.v1`: 144 bytes, alignment 8."""
+    """`mole.Pose.v2`: 168 bytes, alignment 8."""
 
     _fields_ = [
         ("header", Header),
@@ -343,6 +346,7 @@ class Pose(ctypes.Structure):
         ("y", ctypes.c_double),
         ("theta", ctypes.c_double),
         ("covariance", ctypes.c_double * 9),
+        ("odom", ctypes.c_double * 3),
         ("update_ns", ctypes.c_uint64),
         ("estimator", ctypes.c_uint32),
         ("_pad", ctypes.c_uint32),
@@ -350,10 +354,10 @@ class Pose(ctypes.Structure):
 
     @classmethod
     def type_name(cls) -> str:
-        return "mole.Pose.v1"
+        return "mole.Pose.v2"
 
 
-_check(Pose, 144, 8, [0, 32, 40, 48, 56, 128, 136, 140])
+_check(Pose, 168, 8, [0, 32, 40, 48, 56, 128, 152, 160, 164])
 
 
 class Particle(ctypes.Structure):

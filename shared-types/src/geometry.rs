@@ -87,10 +87,72 @@ pub fn wrap_angle(a: f64) -> f64 {
     r
 }
 
+/// The pose reached from `from` along one unicycle arc of length `s` (m, negative backwards)
+/// that turns by `dtheta` (rad): the motion of constant (v, ω) over dt with s = v·dt and
+/// dθ = ω·dt (algorithms §6.3's motion model).
+pub fn arc_to(from: Pose2, s: f64, dtheta: f64) -> Pose2 {
+    let (x, y) = if dtheta.abs() < 1e-9 {
+        (from.x + s * from.theta.cos(), from.y + s * from.theta.sin())
+    } else {
+        let r = s / dtheta;
+        (
+            from.x + r * ((from.theta + dtheta).sin() - from.theta.sin()),
+            from.y + r * (from.theta.cos() - (from.theta + dtheta).cos()),
+        )
+    };
+    Pose2::new(x, y, wrap_angle(from.theta + dtheta))
+}
+
+/// The one unicycle arc `(s, dθ)` that takes `from` to `to`, the inverse of [`arc_to`] for a
+/// turn of less than π (a longer one is taken the short way round).
+pub fn arc_between(from: Pose2, to: Pose2) -> (f64, f64) {
+    let (c, n) = (from.theta.cos(), from.theta.sin());
+    let (ex, ey) = (to.x - from.x, to.y - from.y);
+    // The chord in `from`'s frame; an arc's chord points half its turn off the heading.
+    let (dx, dy) = (c * ex + n * ey, -n * ex + c * ey);
+    let dtheta = wrap_angle(to.theta - from.theta);
+    let half = dtheta / 2.0;
+    let chord = dx.hypot(dy);
+    let length = if half.abs() < 1e-9 {
+        chord
+    } else {
+        chord * half / half.sin()
+    };
+    let forward = dx * half.cos() + dy * half.sin() >= 0.0;
+    (if forward { length } else { -length }, dtheta)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use core::f64::consts::PI;
+
+    /// An arc and back: straight, turning either way, backwards, and across the ±π seam.
+    #[test]
+    fn arc_between_inverts_arc_to() {
+        let starts = [
+            Pose2::new(1.0, 2.0, 0.3),
+            Pose2::new(-4.0, 0.5, 3.1),
+            Pose2::new(0.0, 0.0, -2.9),
+        ];
+        for from in starts {
+            for (s, dtheta) in [(0.5, 0.0), (0.3, 0.4), (0.3, -1.2), (-0.2, 0.7), (0.0, 0.5)] {
+                let to = arc_to(from, s, dtheta);
+                let (s2, dtheta2) = arc_between(from, to);
+                assert!((s2 - s).abs() < 1e-9, "{from:?} {s} {dtheta}: s {s2}");
+                assert!(
+                    (dtheta2 - dtheta).abs() < 1e-9,
+                    "{from:?} {s} {dtheta}: dθ {dtheta2}"
+                );
+            }
+        }
+        // Straight ahead along the heading, a quarter circle of radius 1.
+        let p = arc_to(Pose2::new(0.0, 0.0, 0.0), PI / 2.0, PI / 2.0);
+        assert!(
+            (p.x - 1.0).abs() < 1e-12 && (p.y - 1.0).abs() < 1e-12,
+            "{p:?}"
+        );
+    }
 
     #[test]
     fn wrap_angle_stays_in_half_open_interval() {

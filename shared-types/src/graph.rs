@@ -91,7 +91,7 @@ pub const GRAPH: &[RoleSpec] = &[
         ],
         step_output: Some(SENSING_SCAN.name),
         swap: Swap::Allowed,
-        resume: Resume::Fresh("each reading is drawn from the step's truth alone"),
+        resume: Resume::From(&[SENSING_ODOM.name]),
         in_loop: true,
         stop_rank: 4,
     },

@@ -86,10 +86,10 @@ pub fn all() -> Vec<TypeLayout> {
             n_contacts, _pad, contacts),
         layout!(Scan, type_name::<Scan>(); header, angle_min, angle_increment, range_max, n_beams, ranges),
         layout!(Tactile, type_name::<Tactile>(); header, n_sensors, radius, sensors),
-        layout!(Odom, type_name::<Odom>(); header, v, omega, dt),
+        layout!(Odom, type_name::<Odom>(); header, x, y, theta, v, omega, dt),
         layout!(Beacons, type_name::<Beacons>(); header, n_readings, _pad, readings),
         layout!(Fix, type_name::<Fix>(); header, x, y, std, valid, _pad),
-        layout!(Pose, type_name::<Pose>(); header, x, y, theta, covariance, update_ns, estimator, _pad),
+        layout!(Pose, type_name::<Pose>(); header, x, y, theta, covariance, odom, update_ns, estimator, _pad),
         layout!(Particles, type_name::<Particles>(); header, n_particles, _pad, particles),
         layout!(Landmarks, type_name::<Landmarks>(); header, n_landmarks, estimator, landmarks),
         layout!(Trajectory, type_name::<Trajectory>(); header, first_tick, n_poses, estimator, poses),
@@ -487,10 +487,10 @@ const _: () = {
     assert!(size_of::<Truth>() == 104 + 40 * MAX_CONTACTS);
     assert!(size_of::<Scan>() == 48 + 4 * MAX_BEAMS);
     assert!(size_of::<Tactile>() == 40 + 16 * MAX_TACTILE);
-    assert!(size_of::<Odom>() == 56);
+    assert!(size_of::<Odom>() == 80);
     assert!(size_of::<Beacons>() == 40 + 24 * MAX_BEACONS);
     assert!(size_of::<Fix>() == 64);
-    assert!(size_of::<Pose>() == 144);
+    assert!(size_of::<Pose>() == 168);
     assert!(size_of::<Particles>() == 40 + 16 * MAX_PARTICLES);
     assert!(size_of::<Landmark>() == 56);
     assert!(size_of::<Landmarks>() == 40 + 56 * MAX_LANDMARKS);

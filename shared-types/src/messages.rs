@@ -392,12 +392,18 @@ impl Message for Tactile {
     }
 }
 
-/// `sensing/odom`: measured wheel velocities over the last step.
+/// `sensing/odom`: wheel odometry. `x, y, theta`: the pose integrated from the wheels since
+/// sensing first started, in the odom frame (REP 105: continuous, drifting, its origin where the
+/// robot started); `v, omega`: the velocities measured over the last `dt`. A reader that missed
+/// steps takes the motion between two odometry poses, which nothing lost.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("mole.Odom.v1")]
+#[type_name("mole.Odom.v2")]
 pub struct Odom {
     pub header: Header,
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
     pub v: f64,
     pub omega: f64,
     pub dt: f64,
@@ -411,6 +417,7 @@ impl Message for Odom {
         &mut self.header
     }
     fn validate(&self) -> Result<(), Invalid> {
+        all_finite("x/y/theta", &[self.x, self.y, self.theta])?;
         all_finite("v/omega/dt", &[self.v, self.omega, self.dt])?;
         if self.dt < 0.0 {
             return Err(Invalid::OutOfRange("dt"));
@@ -512,7 +519,7 @@ impl Message for Fix {
 /// `localization/pose`: the estimate (μ, Σ) after step `tick`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("mole.Pose.v1")]
+#[type_name("mole.Pose.v2")]
 pub struct Pose {
     pub header: Header,
     pub x: f64,
@@ -520,6 +527,9 @@ pub struct Pose {
     pub theta: f64,
     /// Σ over (x, y, θ), row-major.
     pub covariance: [f64; 9],
+    /// The odometry pose (`sensing/odom`'s x, y, θ) of the step this estimate is for: with the
+    /// estimate it gives map → odom, and a restarted estimator takes the motion since from it.
+    pub odom: [f64; 3],
     /// How long predict + correct took for this step (ns).
     pub update_ns: u64,
     /// Which estimator: an [`crate::EstimatorKind`] code.
@@ -540,6 +550,7 @@ impl Message for Pose {
         }
         all_finite("x/y/theta", &[self.x, self.y, self.theta])?;
         all_finite("covariance", &self.covariance)?;
+        all_finite("odom", &self.odom)?;
         Ok(())
     }
 }

@@ -32,7 +32,9 @@ pub use pf::{ParticleFilter, PfConfig, low_variance_resample};
 
 pub use graph_slam::GraphSlamEstimator;
 pub use mole_types::EstimatorKind;
-use mole_types::{Beacons, Fix, Landmarks, Odom, Particles, Pose, Pose2, Trajectory, WorldMap};
+use mole_types::{
+    Beacons, Fix, Landmarks, Odom, Particles, Pose, Pose2, Trajectory, WorldMap, arc_between,
+};
 pub use slam::{EkfSlamEstimator, FastSlamEstimator};
 use thiserror::Error;
 
@@ -72,16 +74,42 @@ impl<'a> Readings<'a> {
     }
 }
 
-/// The odometry of a step that comes `ticks` world steps after the one handled before (a crashed
-/// sensing, a restart of this process, a realtime step skipped under load): its velocities held
-/// over the whole gap, dt capped at [`models::MAX_ODOM_DT`]. Predicting over the gap moves the
-/// estimate to where the robot went and widens its covariance for the motion nobody measured;
-/// predicting one step left the estimate behind and the χ² gate then refused every correction
-/// (a 0.3 s gap took the EKF's RMSE from 0.015 m to 0.16 m for the rest of the run).
-pub fn odometry_over_gap(odom: &Odom, ticks: Option<u64>) -> Odom {
-    let steps = ticks.unwrap_or(1).max(1) as f64;
+/// The odometry a step predicts with, given the odometry pose of the step handled before
+/// (`before`; none on a fresh start) and how many world steps of `tick_dt` ago that was. One
+/// step: the velocities measured over it. After a gap (this process stopped or restarted, a
+/// realtime step skipped under load): the one arc between the two odometry poses, so the
+/// estimate moves as far as the wheels did, over the gap's time, dt capped at
+/// [`models::MAX_ODOM_DT`] (the arc is kept whole: its velocities grow instead). Without an
+/// odometry pose to start from, the newest velocities are held over the gap. (Predicting one
+/// step left the estimate behind and the χ² gate then refused every correction: a 0.3 s gap
+/// took the EKF's RMSE from 0.015 m to 0.16 m for the rest of the run; holding the newest
+/// velocities lost the motion before the robot stopped.)
+pub fn odometry_since(
+    odom: &Odom,
+    before: Option<[f64; 3]>,
+    ticks: Option<u64>,
+    tick_dt: f64,
+) -> Odom {
+    let steps = ticks.unwrap_or(1).max(1);
+    if steps == 1 {
+        return *odom;
+    }
+    let gap = steps as f64 * tick_dt;
+    let Some([x, y, theta]) = before.filter(|_| gap > 0.0) else {
+        return Odom {
+            dt: (odom.dt * steps as f64).min(models::MAX_ODOM_DT),
+            ..*odom
+        };
+    };
+    let (s, dtheta) = arc_between(
+        Pose2::new(x, y, theta),
+        Pose2::new(odom.x, odom.y, odom.theta),
+    );
+    let dt = gap.min(models::MAX_ODOM_DT);
     Odom {
-        dt: (odom.dt * steps).min(models::MAX_ODOM_DT),
+        v: s / dt,
+        omega: dtheta / dt,
+        dt,
         ..*odom
     }
 }
@@ -305,18 +333,38 @@ pub(crate) mod test_support {
 mod tests {
     use super::*;
 
-    /// A gap of n steps predicts over n·dt at the newest velocities, capped at the longest dt
-    /// odometry may cover; no gap (or a fresh start) is one step.
+    /// No gap (or a fresh start) is the step's own odometry. A gap of n steps predicts the
+    /// one arc between the two odometry poses over n·dt (capped at the longest dt odometry may
+    /// cover, the arc kept whole); with no odometry pose to start from, the newest velocities
+    /// over the gap.
     #[test]
     fn odometry_over_a_gap_covers_the_whole_gap() {
         let mut odom: Odom = bytemuck::Zeroable::zeroed();
         (odom.v, odom.omega, odom.dt) = (0.3, -0.2, 0.01);
-        let dt = |ticks| odometry_over_gap(&odom, ticks).dt;
-        assert_eq!((dt(None), dt(Some(1)), dt(Some(0))), (0.01, 0.01, 0.01));
-        assert!((dt(Some(30)) - 0.3).abs() < 1e-12);
-        assert_eq!(dt(Some(5000)), models::MAX_ODOM_DT);
-        let bridged = odometry_over_gap(&odom, Some(30));
-        assert_eq!((bridged.v, bridged.omega), (0.3, -0.2));
+        (odom.x, odom.y, odom.theta) = (1.0, 2.0, 0.5);
+        let since = |odom: &Odom, before, ticks| odometry_since(odom, before, ticks, 0.01);
+        for ticks in [None, Some(1), Some(0)] {
+            assert_eq!(since(&odom, Some([0.0; 3]), ticks), odom);
+        }
+        let held = since(&odom, None, Some(30));
+        assert!((held.dt - 0.3).abs() < 1e-12);
+        assert_eq!((held.v, held.omega), (0.3, -0.2));
+        assert_eq!(since(&odom, None, Some(5000)).dt, models::MAX_ODOM_DT);
+        // The wheels went on while this process was away: from (0.7, 2.1, 0.6) along the arc.
+        let before = Pose2::new(0.7, 2.1, 0.6);
+        let (s, dtheta) = (0.4, -0.1);
+        let here = mole_types::arc_to(before, s, dtheta);
+        (odom.x, odom.y, odom.theta) = (here.x, here.y, here.theta);
+        let bridged = since(&odom, Some([before.x, before.y, before.theta]), Some(30));
+        assert!((bridged.dt - 0.3).abs() < 1e-12);
+        assert!((bridged.v * bridged.dt - s).abs() < 1e-9, "{bridged:?}");
+        assert!(
+            (bridged.omega * bridged.dt - dtheta).abs() < 1e-9,
+            "{bridged:?}"
+        );
+        let long = since(&odom, Some([before.x, before.y, before.theta]), Some(500));
+        assert_eq!(long.dt, models::MAX_ODOM_DT);
+        assert!((long.v * long.dt - s).abs() < 1e-9, "{long:?}");
     }
 
     /// Every kind builds, starts at the start pose, and publishes particles (PF) or landmarks

@@ -8,7 +8,7 @@
 
 use clap::Parser;
 use mole_localization::slam::{PEER_LANDMARKS, PeerArgs, PeerFusion};
-use mole_localization::{EstimatorKind, Readings, odometry_over_gap, pf, start_estimator};
+use mole_localization::{EstimatorKind, Readings, odometry_since, pf, start_estimator};
 use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule, now_ns};
 use mole_types::{env, topics};
 use std::process::ExitCode;
@@ -76,9 +76,13 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?;
     let mut offer_out = peer.map(|_| p.peer_output(PEER_LANDMARKS)).transpose()?;
     let (mut fusion, mut solves) = (PeerFusion::new(args.peers.fuse_every), 0);
+    // The odometry pose of the step handled last (a replacement: of its predecessor's last).
+    let mut odom_before = pose_was.as_deref().map(|pose| pose.odom);
+    let tick_dt = std::cell::Cell::new(0.0);
 
     p.run(
         |start| {
+            tick_dt.set(start.map.dt);
             Ok(start_estimator(
                 kind,
                 start.map,
@@ -88,7 +92,10 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             )?)
         },
         |estimator, step| {
-            let odom = odometry_over_gap(step.trigger(odom), step.ticks_since_last());
+            let measured = step.trigger(odom);
+            let gap = step.ticks_since_last();
+            let odom = odometry_since(measured, odom_before, gap, tick_dt.get());
+            odom_before = Some([measured.x, measured.y, measured.theta]);
             let readings = Readings::of(&odom).with_beacons(step.get(beacons));
             let started = now_ns();
             estimator.step(&readings.with_fix(step.get(fix)));
@@ -100,6 +107,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             pose_out.publish(k, origin, |pose| {
                 estimator.write_pose(pose);
                 pose.update_ns = update_ns;
+                pose.odom = odom_before.unwrap_or_default();
             })?;
             if kind == EstimatorKind::Pf && k % PARTICLES_EVERY == 0 {
                 particles_out.publish(k, origin, |out| _ = estimator.write_particles(out))?;

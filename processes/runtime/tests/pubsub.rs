@@ -240,7 +240,7 @@ fn a_different_layout_on_a_topic_is_refused_naming_both_types() {
     assert!(
         text.contains("planning/cmd")
             && text.contains("mole.Cmd.v1")
-            && text.contains("mole.Odom.v1"),
+            && text.contains("mole.Odom.v2"),
         "{text}"
     );
 }

@@ -15,8 +15,8 @@ pub use tactile::{sensor_angle, split_between_sensors};
 use core::f64::consts::TAU;
 use mole_types::{
     BeaconReading, BeaconSite, Beacons, Fix, Invalid, LANDMARK_ANONYMOUS, MAX_BEACONS, MAX_BEAMS,
-    MAX_TACTILE, Message, Odom, Scan, SensorSpec, Tactile, TactileReading, Truth, WorldMap,
-    wrap_angle,
+    MAX_TACTILE, Message, Odom, Pose2, Scan, SensorSpec, Tactile, TactileReading, Truth, WorldMap,
+    arc_between, arc_to, wrap_angle,
 };
 use rand::RngExt;
 use rand::SeedableRng;
@@ -123,6 +123,11 @@ pub struct Sensing {
     /// Per-sensor force accumulator (robot frame, N) and whether the sensor carries a contact.
     force: [[f64; 2]; MAX_TACTILE],
     loaded: [bool; MAX_TACTILE],
+    /// The odometry pose (odom frame), and the tick and true pose of the last step odometry saw.
+    odom_pose: Pose2,
+    odom_seen: Option<(u64, Pose2)>,
+    /// The tick of the odometry resumed (a restart), until the first step.
+    odom_resumed: Option<u64>,
 }
 
 impl Sensing {
@@ -171,6 +176,9 @@ impl Sensing {
             rng_fix: stream(seed, STREAM_FIX),
             force: [[0.0; 2]; MAX_TACTILE],
             loaded: [false; MAX_TACTILE],
+            odom_pose: Pose2::default(),
+            odom_seen: None,
+            odom_resumed: None,
         })
     }
 
@@ -287,11 +295,42 @@ impl Sensing {
     }
 
     /// Odometry: the velocities applied this step plus Gaussian noise (σ = `odom_v_std`,
-    /// `odom_omega_std`), over `dt = map.dt`.
+    /// `odom_omega_std`) over `dt = map.dt`, integrated into the odometry pose. After steps this
+    /// process did not see (it was stopped, or busy) the wheels turned all the same: the motion
+    /// is then the truth's between the two steps, as one arc, with the noise of as many steps,
+    /// and `dt` spans them. After a restart, over the steps since the odometry it resumed, the
+    /// velocities measured now are held (that motion went unseen).
     pub fn odom(&mut self, truth: &Truth, out: &mut Odom) {
-        out.v = truth.v + gauss(&mut self.rng_odom, self.spec.odom_v_std);
-        out.omega = truth.omega + gauss(&mut self.rng_odom, self.spec.odom_omega_std);
-        out.dt = self.dt;
+        let pose = Pose2::new(truth.x, truth.y, truth.theta);
+        let tick = truth.header.tick;
+        let since = self.odom_seen.map(|(seen, _)| seen).or(self.odom_resumed);
+        let steps = since.map_or(1, |t| tick.saturating_sub(t).max(1));
+        let dt = steps as f64 * self.dt;
+        let (v_std, omega_std) = (self.spec.odom_v_std, self.spec.odom_omega_std);
+        let (v, omega) = match self.odom_seen {
+            Some((_, before)) if steps > 1 => {
+                let (s, dtheta) = arc_between(before, pose);
+                let spread = (steps as f64).sqrt() * self.dt;
+                let s = s + spread * gauss(&mut self.rng_odom, v_std);
+                let dtheta = dtheta + spread * gauss(&mut self.rng_odom, omega_std);
+                (s / dt, dtheta / dt)
+            }
+            _ => (
+                truth.v + gauss(&mut self.rng_odom, v_std),
+                truth.omega + gauss(&mut self.rng_odom, omega_std),
+            ),
+        };
+        self.odom_pose = arc_to(self.odom_pose, v * dt, omega * dt);
+        self.odom_seen = Some((tick, pose));
+        (out.x, out.y, out.theta) = (self.odom_pose.x, self.odom_pose.y, self.odom_pose.theta);
+        (out.v, out.omega, out.dt) = (v, omega, dt);
+    }
+
+    /// Goes on from the odometry of the process this one follows (a restart, a swap), so the
+    /// odom frame stays continuous.
+    pub fn resume_odometry(&mut self, odom: &Odom) {
+        self.odom_pose = Pose2::new(odom.x, odom.y, odom.theta);
+        self.odom_resumed = Some(odom.header.tick);
     }
 
     /// Beacons: range and bearing (from the heading, wrapped to (−π, π]) to every beacon within

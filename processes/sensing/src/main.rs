@@ -24,6 +24,8 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut p = Process::new("sensing", &args.common)?;
+    // A replacement (a restart, a swap) goes on in the odom frame of the one before it.
+    let odom_was = p.resume_from(topics::SENSING_ODOM)?;
     let truth = p.trigger(topics::WORLD_TRUTH, Order::Newest)?;
     let mut scan_out = p.output(topics::SENSING_SCAN)?;
     let mut tactile_out = p.output(topics::SENSING_TACTILE)?;
@@ -32,7 +34,13 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut fix_out = p.output(topics::SENSING_FIX)?;
 
     p.run(
-        |start| Ok(Sensing::new(start.map, start.seed)?),
+        |start| {
+            let mut sensing = Sensing::new(start.map, start.seed)?;
+            if let Some(odom) = odom_was.as_deref() {
+                sensing.resume_odometry(odom);
+            }
+            Ok(sensing)
+        },
         |sensing, step| {
             let truth = step.trigger(truth);
             // The world's final state ends the run: no step follows it, so nothing is sensed.

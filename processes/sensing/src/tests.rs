@@ -368,6 +368,48 @@ fn odometry_is_the_applied_velocity_plus_noise() {
     assert_gaussian(&dw, 0.05, 0.05);
 }
 
+/// The odometry pose integrates the measured velocities in the odom frame; over steps sensing
+/// did not see, it follows the truth's motion between the two it saw (noise-free here), so a
+/// reader that missed messages loses nothing; a restart goes on from the pose it resumes.
+#[test]
+fn odometry_integrates_and_covers_the_steps_it_did_not_see() {
+    let m = map();
+    let mut s = sensing(&m);
+    let mut t = truth(5.0, 5.0, 0.0);
+    (t.v, t.omega) = (0.5, 0.0);
+    let mut out: Odom = bytemuck::Zeroable::zeroed();
+    for tick in 0..10 {
+        t.header.tick = tick;
+        s.odom(&t, &mut out);
+    }
+    assert_relative_eq!(out.x, 0.05, epsilon = 1e-12);
+    assert_eq!((out.y, out.theta, out.dt), (0.0, 0.0, 0.01));
+    // 40 steps unseen: the robot went on to (5.5, 5.2), turning by 0.8 rad along one arc.
+    let before = Pose2::new(t.x, t.y, t.theta);
+    let there = mole_types::arc_to(before, 0.6, 0.8);
+    (t.x, t.y, t.theta, t.header.tick) = (there.x, there.y, there.theta, 49);
+    s.odom(&t, &mut out);
+    assert_relative_eq!(out.dt, 0.4, epsilon = 1e-12);
+    assert_relative_eq!(out.v * out.dt, 0.6, epsilon = 1e-9);
+    assert_relative_eq!(out.omega * out.dt, 0.8, epsilon = 1e-9);
+    let expected = mole_types::arc_to(Pose2::new(0.05, 0.0, 0.0), 0.6, 0.8);
+    assert_relative_eq!(out.x, expected.x, epsilon = 1e-9);
+    assert_relative_eq!(out.y, expected.y, epsilon = 1e-9);
+    assert_relative_eq!(out.theta, expected.theta, epsilon = 1e-9);
+    // A restart resumes the odom frame; over the 11 steps since the odometry it resumed (tick
+    // 49), it holds the velocities it measures now.
+    let mut restarted = sensing(&m);
+    out.header.tick = 49;
+    restarted.resume_odometry(&out);
+    let mut next: Odom = bytemuck::Zeroable::zeroed();
+    t.header.tick = 60;
+    restarted.odom(&t, &mut next);
+    let held = mole_types::arc_to(expected, 0.5 * 0.11, 0.0);
+    assert_relative_eq!(next.x, held.x, epsilon = 1e-9);
+    assert_relative_eq!(next.y, held.y, epsilon = 1e-9);
+    assert_relative_eq!(next.dt, 0.11, epsilon = 1e-12);
+}
+
 #[test]
 fn fix_is_valid_on_its_period_only() {
     let mut m = map();

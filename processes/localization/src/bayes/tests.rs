@@ -114,6 +114,9 @@ fn corridor_belief_concentrates_on_the_true_cell() {
         x += 1.0 * dt;
         let odom = Odom {
             header: Header::default(),
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
             v: 1.0 + 0.05 * g(),
             omega: 0.05 * g(),
             dt,

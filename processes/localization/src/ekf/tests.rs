@@ -125,6 +125,9 @@ fn predict_follows_g_and_grows_sigma() {
     let before = ekf.sigma;
     ekf.predict(&Odom {
         header: Header::default(),
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
         v: 1.0,
         omega: 0.5,
         dt: 0.1,
@@ -185,12 +188,18 @@ fn bad_readings_are_ignored_and_counted() {
     correct(&mut ekf, &empty_beacons(), &fix);
     ekf.predict(&Odom {
         header: Header::default(),
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
         v: f64::NAN,
         omega: 0.0,
         dt: 0.01,
     });
     ekf.predict(&Odom {
         header: Header::default(),
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
         v: 0.0,
         omega: 0.0,
         dt: -0.01,
@@ -361,6 +370,9 @@ fn simulate(seed: u64, ticks: usize) -> RunStats {
         truth = Ekf::g(&truth, v, omega, dt);
         let odom = Odom {
             header: Header::default(),
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
             v: v + s.odom_v_std * gauss(&mut rng),
             omega: omega + s.odom_omega_std * gauss(&mut rng),
             dt,
