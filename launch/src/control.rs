@@ -14,7 +14,7 @@ use std::time::Duration;
 #[derive(Debug, Clone, Args)]
 pub struct SwapArgs {
     /// Namespace of the running stack.
-    #[arg(long, default_value = "robot0")]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE)]
     pub namespace: String,
     /// How long to wait for the swap (s).
     #[arg(long, default_value_t = 60.0)]
@@ -30,7 +30,7 @@ pub struct SwapArgs {
 #[derive(Debug, Clone, Args)]
 pub struct NamespaceArgs {
     /// Namespace of the running stack.
-    #[arg(long, default_value = "robot0")]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE)]
     pub namespace: String,
 }
 

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 #[derive(Debug, Clone, Args)]
 pub struct FaultArgs {
     /// Namespace of the running stack.
-    #[arg(long, default_value = "robot0", global = true)]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE, global = true)]
     pub namespace: String,
     #[command(subcommand)]
     pub what: FaultCommand,

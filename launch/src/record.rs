@@ -24,7 +24,7 @@ const RECORDER: &str = "recorder";
 #[derive(Debug, Clone, Args)]
 pub struct RecordArgs {
     /// Namespace of the running stack.
-    #[arg(long, default_value = "robot0")]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE)]
     pub namespace: String,
     /// The MCAP file to write (replaced if it exists).
     pub file: PathBuf,

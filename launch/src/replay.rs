@@ -42,7 +42,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub check: bool,
     /// Namespace of the replayed stack.
-    #[arg(long, default_value = "robot0")]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE)]
     pub namespace: String,
     /// Output directory for summary.json, map.png, the logs and the replay's inputs.
     #[arg(long, default_value = "runs/replay")]

@@ -21,7 +21,7 @@ pub const TOP_ROLE: &str = "top";
 #[derive(Debug, Args)]
 pub struct TopArgs {
     /// Namespace of the stack to watch.
-    #[arg(long, default_value = "robot0")]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE)]
     pub namespace: String,
     /// Print one snapshot (after two seconds of statistics) and exit.
     #[arg(long)]

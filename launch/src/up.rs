@@ -93,7 +93,7 @@ pub struct UpArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Namespace: services are mole/<namespace>/<topic>.
-    #[arg(long, default_value = "robot0")]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE)]
     pub namespace: String,
     /// Output directory for summary.json, map.png and the process logs.
     #[arg(long, default_value = "runs/latest")]

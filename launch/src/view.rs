@@ -53,7 +53,7 @@ pub struct ViewArgs {
     /// timeline: play, pause, seek, speed.
     pub file: Option<PathBuf>,
     /// Namespace of the running stack (not with FILE: a recording needs no stack).
-    #[arg(long, default_value = "robot0", conflicts_with = "file")]
+    #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE, conflicts_with = "file")]
     pub namespace: String,
     #[command(flatten)]
     pub serve: ServeArgs,

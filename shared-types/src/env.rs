@@ -35,6 +35,10 @@ env_vars! {
     RESUME = "MOLE_RESUME": "a directory with the last outputs of the process this one restarts after a crash (set by the launcher)";
 }
 
+/// The namespace of a stack started without `--namespace` (or `MOLE_NAMESPACE`), and the one
+/// every tool joins by default.
+pub const DEFAULT_NAMESPACE: &str = "robot0";
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -29,7 +29,7 @@ const LOOP_CLOSE: Topic<mole_types::Cmd> = topics::PLANNING_CMD;
 #[derive(Debug, Clone, clap::Args)]
 pub struct CommonArgs {
     /// Namespace of the stack: services are `mole/<namespace>/<topic>`.
-    #[arg(long, env = env::NAMESPACE, default_value = "robot0")]
+    #[arg(long, env = env::NAMESPACE, default_value = env::DEFAULT_NAMESPACE)]
     pub namespace: String,
     /// Clock mode: realtime or lockstep.
     #[arg(long, env = env::MODE, default_value = "realtime")]
