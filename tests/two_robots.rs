@@ -5,12 +5,17 @@
 //!
 //! Lockstep, because each stack is then the same run whatever the load of the machine (two
 //! stacks share two cores here): robot A alone is bit for bit the run robot A makes with its
-//! peer up to the first fusion, so the difference is the fusion's. The two robots' clocks stay
-//! independent: a robot reads the newest map its peer offers and never waits for it.
+//! peer up to the first fusion, so the difference is the fusion's. A robot reads the newest map
+//! its peer offers and never waits for it, so which map a round fuses depends on the two
+//! stacks' pace: left free, one pair's fused result swung 5× between two runs of the test. So
+//! the fused stacks start held (`--paused`) and an operator steps them in turns of one fusion
+//! period, A then B: each round fuses the map of a known step, and the test is the same run
+//! every time.
 
 use mole_integration_tests::*;
 use mole_monitor::{SlamSummary, mean_nees_interval};
-use mole_types::{EndReason, EstimatorKind, PlannerKind};
+use mole_runtime::ClockMode;
+use mole_types::{EndReason, EstimatorKind, PACE_STEP, PlannerKind, Truth};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -108,24 +113,52 @@ impl Drop for LaunchDir {
     }
 }
 
-/// Starts `mole up` with `launch` for the robot with `seed`, in `namespace`, on the ring.
-fn start(namespace: &str, launch: &Path, seed: &str) -> Stack {
-    Stack::start_in(
-        namespace,
-        &[
-            launch.to_str().expect("a UTF-8 path"),
-            "--seed",
-            seed,
-            "--scenario",
-            "scenarios/slam_loop.toml",
-            "--planner",
-            PlannerKind::Frontier.name(),
-            "--estimator",
-            EstimatorKind::EkfSlam.name(),
-            "--ticks",
-            TICKS,
-        ],
-    )
+/// Starts `mole up` with `launch` for the robot with `seed`, in `namespace`, on the ring; held
+/// after step 0 when `paused`.
+fn start(namespace: &str, launch: &Path, seed: &str, paused: bool) -> Stack {
+    let mut args = vec![
+        launch.to_str().expect("a UTF-8 path"),
+        "--seed",
+        seed,
+        "--scenario",
+        "scenarios/slam_loop.toml",
+        "--planner",
+        PlannerKind::Frontier.name(),
+        "--estimator",
+        EstimatorKind::EkfSlam.name(),
+        "--ticks",
+        TICKS,
+    ];
+    if paused {
+        args.push("--paused");
+    }
+    Stack::start_in(namespace, &args)
+}
+
+/// Steps the two held stacks in turns of one fusion period, A then B, until both runs ended.
+/// A turn is over when its planner has published the status of the turn's last step, which
+/// comes after localization published its map of that step: so each of A's rounds at step k
+/// fuses B's map of step k − period, and each of B's fuses A's of step k.
+fn step_in_turns(stacks: &[Stack; 2]) {
+    let period: u32 = FUSE_EVERY.parse().expect("a number");
+    let mut operators = stacks
+        .each_ref()
+        .map(|s| Operator::join(s, ClockMode::Lockstep));
+    let ended = |o: &Operator| o.truth.latest().is_some_and(Truth::is_end);
+    let mut at = [0_u64; 2];
+    while !operators.iter().all(ended) {
+        for (i, operator) in operators.iter_mut().enumerate() {
+            if ended(operator) {
+                continue;
+            }
+            let goal = at[i] + u64::from(period);
+            operator.send_pace(PACE_STEP, period);
+            operator.follow_until("a turn", Duration::from_secs(300), |o| {
+                ended(o) || o.status.tick().is_some_and(|t| t >= goal)
+            });
+            at[i] = goal;
+        }
+    }
 }
 
 /// Waits for `stack` to end by itself, then reads its run; none of its processes is left.
@@ -166,11 +199,12 @@ fn finish(stack: Stack) -> Run {
 ///     both had (fused, or kept where CI's optimum was its own estimate: the better robot may
 ///     keep all of its own), and at least one robot's map changed in each pair.
 ///
-/// Measured (two runs of the test; the fused runs are not bit for bit repeatable, the robots'
-/// clocks being independent): RMSE A 0.0121 and 0.0111 m fused against 0.0151 m alone, B 0.0186
-/// and 0.0181 m against 0.0234 and 0.0232 m; fused NEES A 0.78 and 0.98, B 1.18 and 1.18,
-/// against an upper end of 3.61. A single pair is no evidence either way: fused against alone,
-/// one robot's RMSE ranged from 0.045 against 0.031 m to 0.020 against 0.059 m. A peer map
+/// Measured (two runs of the test, the same to the last digit printed): RMSE A 0.0101 m fused
+/// against 0.0151 m alone, B 0.0179 m against 0.0232 m; fused NEES A 0.92, B 1.24, against an
+/// upper end of 3.61. (Left to run free, two runs gave A 0.0152 and 0.0158 m fused, above its
+/// alone run, and two others 0.0121 and 0.0124.) A single pair is no evidence either way:
+/// fused against alone, one robot's RMSE ranged from 0.045 against 0.031 m to 0.020 against
+/// 0.059 m. A peer map
 /// shifted by 0.1 m puts robot A's fused RMSE at 0.034 m; the peer's covariance taken at a
 /// quarter of what it is puts the fused NEES above 100.
 ///
@@ -187,15 +221,16 @@ fn two_robots_fusing_their_maps_by_ci_map_no_worse_than_alone_and_stay_consisten
         // Alone: both at once (lockstep: each the same run whatever the load).
         let alone_stacks = [0, 1].map(|r| {
             let namespace = unique_namespace(["two_a_alone", "two_b_alone"][r]);
-            start(&namespace, &stock, seeds[r])
+            start(&namespace, &stock, seeds[r], false)
         });
         let alone = alone_stacks.map(finish);
         // Together: each robot's localization has the other's namespace as its peer.
         let namespaces = [unique_namespace("two_a"), unique_namespace("two_b")];
         let fused_stacks = [0, 1].map(|r| {
             let file = launch.with_peer(["a.toml", "b.toml"][r], &namespaces[1 - r]);
-            start(&namespaces[r], &file, seeds[r])
+            start(&namespaces[r], &file, seeds[r], true)
         });
+        step_in_turns(&fused_stacks);
         let fused = fused_stacks.map(finish);
         for (r, robot) in ["A", "B"].iter().enumerate() {
             let (f, a) = (&fused[r], &alone[r]);

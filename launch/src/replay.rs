@@ -209,6 +209,7 @@ pub fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         mode: Some(mode),
         ticks: Some(window.to),
         duration: None,
+        paused: false,
         goal: None,
         local_planner: None,
         seed: Some(seed),

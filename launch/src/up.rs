@@ -83,6 +83,9 @@ pub struct UpArgs {
     /// Simulated seconds to run.
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Lockstep: hold after step 0 until an operator (the view, a script) paces the run.
+    #[arg(long)]
+    pub paused: bool,
     /// Goal X,Y (m) for the goal-seeking planners (apf, dwa), instead of the scenario's.
     #[arg(long, value_name = "X,Y", value_parser = mole_runtime::parse_point)]
     pub goal: Option<(f64, f64)>,
@@ -617,14 +620,11 @@ fn follow_progress(stack: &mut Stack<'_>) -> Option<RunEnd> {
             stack.watch.last_step = (status.header.tick, Instant::now());
         }
     }
-    // A run the operator holds (paused, or held after its steps) makes no step, and is no stall.
+    // A run the operator holds (paused, or held after its steps, or started `--paused` with no
+    // pace yet) makes no step, and is no stall.
     stack.ports.pace.drain(|_| {});
-    if stack
-        .ports
-        .pace
-        .latest()
-        .is_some_and(|p| p.op != mole_types::PACE_RUN)
-    {
+    let pace = stack.ports.pace.latest();
+    if pace.is_some_and(|p| p.op != mole_types::PACE_RUN) || (stack.args.paused && pace.is_none()) {
         stack.watch.last_step.1 = Instant::now();
     }
     let (step, since) = stack.watch.last_step;

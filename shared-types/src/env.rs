@@ -24,6 +24,7 @@ env_vars! {
     SEED = "MOLE_SEED": "the seed of every random stream (the scenario's otherwise)";
     SCENARIO = "MOLE_SCENARIO": "the scenario file (world)";
     TICKS = "MOLE_TICKS": "steps before the run ends (world)";
+    PAUSED = "MOLE_PAUSED": "lockstep: hold after step 0 until an operator paces the run (world)";
     PLANNER = "MOLE_PLANNER": "the planner (planning, monitor)";
     LOCAL_PLANNER = "MOLE_LOCAL_PLANNER": "the local planner that follows frontier paths (planning)";
     GOAL = "MOLE_GOAL": "a goal `X,Y` in metres that overrides the scenario's (planning)";

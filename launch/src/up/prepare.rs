@@ -250,6 +250,9 @@ fn child_env(
     if let Some(local) = args.local_planner {
         vars.push((env::LOCAL_PLANNER, local.name().to_owned()));
     }
+    if args.paused {
+        vars.push((env::PAUSED, "true".to_owned()));
+    }
     vars.into_iter()
         .map(|(name, value)| (name.to_owned(), value))
         .collect()

@@ -65,7 +65,7 @@ impl Process {
         mut on: impl FnMut(ClockEvent<M>) -> Result<Flow, BoxError>,
     ) -> Result<(), BoxError> {
         let waitset = self.ctx.waitset()?;
-        let mut operator = Operator::open(&self.ctx)?;
+        let mut operator = Operator::open(&self.ctx, self.start_held)?;
         let mut wakers = std::mem::take(&mut self.wakers);
         wakers.push(operator.waker());
         let _attached = waitset.attach_all(&wakers)?;
@@ -227,10 +227,11 @@ struct Operator {
 }
 
 impl Operator {
-    fn open(ctx: &Context) -> Result<Operator, RuntimeError> {
+    /// The operator's pace, holding from the start when `held` ([`Process::start_held`]).
+    fn open(ctx: &Context, held: bool) -> Result<Operator, RuntimeError> {
         Ok(Operator {
             pace: ctx.subscriber(topics::OPERATOR_PACE)?,
-            pacing: Pacing::Run,
+            pacing: if held { Pacing::Hold } else { Pacing::Run },
             started_ns: now_ns(),
             reported_hold: false,
             ignored: 0,

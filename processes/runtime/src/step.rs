@@ -264,6 +264,8 @@ pub struct Process {
     /// beside the loop: [`Process::wakes_after_the_loop`]).
     after_loop: bool,
     pub(crate) resume_after: Option<u64>,
+    /// Lockstep, the clock: hold after step 0 until an operator paces the run.
+    pub(crate) start_held: bool,
 }
 
 impl Process {
@@ -290,7 +292,15 @@ impl Process {
             wakers: Vec::new(),
             after_loop: false,
             resume_after: None,
+            start_held: false,
         })
+    }
+
+    /// Makes the clock ([`Process::run_clock`]) hold after step 0, in lockstep, until an
+    /// operator paces the run (`mole up --paused`): so a test or a user can start several
+    /// stacks and step them in turns from the same first step.
+    pub fn start_held(&mut self) {
+        self.start_held = true;
     }
 
     /// The process's context (mode, seed, namespace).

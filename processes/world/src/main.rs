@@ -29,6 +29,9 @@ struct Args {
     /// Steps to run before the run ends.
     #[arg(long, env = env::TICKS, default_value_t = 3000)]
     ticks: u64,
+    /// Lockstep: hold after step 0 until an operator paces the run.
+    #[arg(long, env = env::PAUSED)]
+    paused: bool,
 }
 
 fn main() -> ExitCode {
@@ -40,6 +43,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         load_scenario(&args.scenario).map_err(|e| mole_runtime::BadInput(e.to_string()))?;
     scenario.seed = args.common.seed.unwrap_or(scenario.seed);
     let mut p = Process::new("world", &args.common)?;
+    if args.paused {
+        p.start_held();
+    }
     // Restarted after a crash: the run goes on from the last truth. In lockstep the step after
     // it takes the command the planner sent to the dead world (from history), so the run is the
     // one an unkilled world makes; in realtime it is taken with the robot stopped.
