@@ -87,24 +87,27 @@ pub fn wrap_angle(a: f64) -> f64 {
     r
 }
 
-/// The pose reached from `from` along one unicycle arc of length `s` (m, negative backwards)
-/// that turns by `dtheta` (rad): the motion of constant (v, ω) over dt with s = v·dt and
-/// dθ = ω·dt (algorithms §6.3's motion model).
-pub fn arc_to(from: Pose2, s: f64, dtheta: f64) -> Pose2 {
-    let (x, y) = if dtheta.abs() < 1e-9 {
-        (from.x + s * from.theta.cos(), from.y + s * from.theta.sin())
+/// Exact unicycle motion over `h` at constant `(v, ω)` (algorithms §6.3's motion model): an
+/// arc of radius v/ω, or a straight line when ω·h is negligible (then the chord along the mid
+/// heading, exact to O((ωh)²)).
+pub fn unicycle_arc(p: Pose2, v: f64, omega: f64, h: f64) -> Pose2 {
+    let turn = omega * h;
+    let (x, y) = if turn.abs() < 1e-9 {
+        let mid = p.theta + 0.5 * turn;
+        (p.x + v * h * mid.cos(), p.y + v * h * mid.sin())
     } else {
-        let r = s / dtheta;
+        let radius = v / omega;
+        let th1 = p.theta + turn;
         (
-            from.x + r * ((from.theta + dtheta).sin() - from.theta.sin()),
-            from.y + r * (from.theta.cos() - (from.theta + dtheta).cos()),
+            p.x + radius * (th1.sin() - p.theta.sin()),
+            p.y - radius * (th1.cos() - p.theta.cos()),
         )
     };
-    Pose2::new(x, y, wrap_angle(from.theta + dtheta))
+    Pose2::new(x, y, wrap_angle(p.theta + turn))
 }
 
-/// The one unicycle arc `(s, dθ)` that takes `from` to `to`, the inverse of [`arc_to`] for a
-/// turn of less than π (a longer one is taken the short way round).
+/// The one unicycle arc `(s, dθ)` that takes `from` to `to`: the inverse of [`unicycle_arc`]
+/// over h = 1 (s = v·h, dθ = ω·h), for a turn of less than π (a longer one is taken the short way round).
 pub fn arc_between(from: Pose2, to: Pose2) -> (f64, f64) {
     let (c, n) = (from.theta.cos(), from.theta.sin());
     let (ex, ey) = (to.x - from.x, to.y - from.y);
@@ -129,7 +132,7 @@ mod tests {
 
     /// An arc and back: straight, turning either way, backwards, and across the ±π seam.
     #[test]
-    fn arc_between_inverts_arc_to() {
+    fn arc_between_inverts_unicycle_arc() {
         let starts = [
             Pose2::new(1.0, 2.0, 0.3),
             Pose2::new(-4.0, 0.5, 3.1),
@@ -137,7 +140,7 @@ mod tests {
         ];
         for from in starts {
             for (s, dtheta) in [(0.5, 0.0), (0.3, 0.4), (0.3, -1.2), (-0.2, 0.7), (0.0, 0.5)] {
-                let to = arc_to(from, s, dtheta);
+                let to = unicycle_arc(from, s, dtheta, 1.0);
                 let (s2, dtheta2) = arc_between(from, to);
                 assert!((s2 - s).abs() < 1e-9, "{from:?} {s} {dtheta}: s {s2}");
                 assert!(
@@ -147,7 +150,7 @@ mod tests {
             }
         }
         // Straight ahead along the heading, a quarter circle of radius 1.
-        let p = arc_to(Pose2::new(0.0, 0.0, 0.0), PI / 2.0, PI / 2.0);
+        let p = unicycle_arc(Pose2::new(0.0, 0.0, 0.0), PI / 2.0, PI / 2.0, 1.0);
         assert!(
             (p.x - 1.0).abs() < 1e-12 && (p.y - 1.0).abs() < 1e-12,
             "{p:?}"

@@ -353,7 +353,7 @@ mod tests {
         // The wheels went on while this process was away: from (0.7, 2.1, 0.6) along the arc.
         let before = Pose2::new(0.7, 2.1, 0.6);
         let (s, dtheta) = (0.4, -0.1);
-        let here = mole_types::arc_to(before, s, dtheta);
+        let here = mole_types::unicycle_arc(before, s, dtheta, 1.0);
         (odom.x, odom.y, odom.theta) = (here.x, here.y, here.theta);
         let bridged = since(&odom, Some([before.x, before.y, before.theta]), Some(30));
         assert!((bridged.dt - 0.3).abs() < 1e-12);

@@ -16,7 +16,7 @@ use core::f64::consts::TAU;
 use mole_types::{
     BeaconReading, BeaconSite, Beacons, Fix, Invalid, LANDMARK_ANONYMOUS, MAX_BEACONS, MAX_BEAMS,
     MAX_TACTILE, Message, Odom, Pose2, Scan, SensorSpec, Tactile, TactileReading, Truth, WorldMap,
-    arc_between, arc_to, wrap_angle,
+    arc_between, unicycle_arc, wrap_angle,
 };
 use rand::RngExt;
 use rand::SeedableRng;
@@ -320,7 +320,7 @@ impl Sensing {
                 truth.omega + gauss(&mut self.rng_odom, omega_std),
             ),
         };
-        self.odom_pose = arc_to(self.odom_pose, v * dt, omega * dt);
+        self.odom_pose = unicycle_arc(self.odom_pose, v, omega, dt);
         self.odom_seen = Some((tick, pose));
         (out.x, out.y, out.theta) = (self.odom_pose.x, self.odom_pose.y, self.odom_pose.theta);
         (out.v, out.omega, out.dt) = (v, omega, dt);

@@ -386,13 +386,13 @@ fn odometry_integrates_and_covers_the_steps_it_did_not_see() {
     assert_eq!((out.y, out.theta, out.dt), (0.0, 0.0, 0.01));
     // 40 steps unseen: the robot went on to (5.5, 5.2), turning by 0.8 rad along one arc.
     let before = Pose2::new(t.x, t.y, t.theta);
-    let there = mole_types::arc_to(before, 0.6, 0.8);
+    let there = mole_types::unicycle_arc(before, 0.6, 0.8, 1.0);
     (t.x, t.y, t.theta, t.header.tick) = (there.x, there.y, there.theta, 49);
     s.odom(&t, &mut out);
     assert_relative_eq!(out.dt, 0.4, epsilon = 1e-12);
     assert_relative_eq!(out.v * out.dt, 0.6, epsilon = 1e-9);
     assert_relative_eq!(out.omega * out.dt, 0.8, epsilon = 1e-9);
-    let expected = mole_types::arc_to(Pose2::new(0.05, 0.0, 0.0), 0.6, 0.8);
+    let expected = mole_types::unicycle_arc(Pose2::new(0.05, 0.0, 0.0), 0.6, 0.8, 1.0);
     assert_relative_eq!(out.x, expected.x, epsilon = 1e-9);
     assert_relative_eq!(out.y, expected.y, epsilon = 1e-9);
     assert_relative_eq!(out.theta, expected.theta, epsilon = 1e-9);
@@ -404,7 +404,7 @@ fn odometry_integrates_and_covers_the_steps_it_did_not_see() {
     let mut next: Odom = bytemuck::Zeroable::zeroed();
     t.header.tick = 60;
     restarted.odom(&t, &mut next);
-    let held = mole_types::arc_to(expected, 0.5 * 0.11, 0.0);
+    let held = mole_types::unicycle_arc(expected, 0.5, 0.0, 0.11);
     assert_relative_eq!(next.x, held.x, epsilon = 1e-9);
     assert_relative_eq!(next.y, held.y, epsilon = 1e-9);
     assert_relative_eq!(next.dt, 0.11, epsilon = 1e-12);

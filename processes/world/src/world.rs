@@ -12,7 +12,7 @@ use crate::broadphase::BucketGrid;
 use crate::scenario::{Goal, Scenario};
 use mole_types::{
     Contact, END_NONE, EndReason, MAX_CONTACTS, Pose2, RobotSpec, Square, TRUTH_END,
-    TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, Truth, wrap_angle,
+    TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, Truth, unicycle_arc, wrap_angle,
 };
 
 /// A wall or square within this gap of the rim (m) counts as touching.
@@ -314,24 +314,6 @@ fn limit(current: f64, command: f64, max: f64, rate: f64, dt: f64) -> f64 {
     };
     let next = current + (target - current).clamp(-step, step);
     next.clamp(-max, max)
-}
-
-/// Exact unicycle motion over `h` at constant `(v, ω)`: an arc of radius v/ω, or a straight
-/// line when ω·h is negligible (then the chord along the mid heading, exact to O((ωh)²)).
-pub fn unicycle_arc(p: Pose2, v: f64, omega: f64, h: f64) -> Pose2 {
-    let turn = omega * h;
-    let (x, y) = if turn.abs() < 1e-9 {
-        let mid = p.theta + 0.5 * turn;
-        (p.x + v * h * mid.cos(), p.y + v * h * mid.sin())
-    } else {
-        let radius = v / omega;
-        let th1 = p.theta + turn;
-        (
-            p.x + radius * (th1.sin() - p.theta.sin()),
-            p.y - radius * (th1.cos() - p.theta.cos()),
-        )
-    };
-    Pose2::new(x, y, wrap_angle(p.theta + turn))
 }
 
 /// Gap between the rim and wall `k` (negative: overlap); walls in the order of [`WALLS`].
