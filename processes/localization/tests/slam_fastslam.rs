@@ -1,12 +1,21 @@
 //! FastSLAM 1.0 on the seeded world, under the sensor noise the SLAM ring ships with: 100
 //! particles and more map better than 30 and fewer, and past 30 every count buys consistency.
+//! Then on the ring of scenarios/slam_loop.toml itself at its 100 Hz (slam_sim::ring): given the
+//! true path its landmark EKFs are consistent, and the map it publishes stays within the stack's
+//! error bound; whether that map is consistent is measured, and held by an ignored test (see
+//! [`fastslam_map_is_consistent_on_the_slam_loop_ring`] for why it fails).
 
 mod slam_sim;
 
-use mole_localization::NoiseModel;
-use mole_localization::slam::{FastSlam, FastSlamConfig, SlamConfig};
-use mole_types::Pose2;
+use mole_localization::slam::{
+    FastSlam, FastSlamConfig, SLAM_CAPACITY, SlamConfig, write_landmarks,
+};
+use mole_localization::{Estimator, EstimatorKind, NoiseModel, Readings, build_estimator};
+use mole_types::{Landmarks, Pose2};
 use nalgebra::Vector2;
+use slam_sim::ring::{
+    MapScore, RING_STEPS, mean_nees_interval, ring_beacons, ring_map, run_ring, score_map,
+};
 use slam_sim::{DT, landmarks, simulate_with};
 
 /// Steps per run: about one loop, every landmark seen.
@@ -130,5 +139,220 @@ fn more_particles_map_better_past_30_and_more_consistently() {
         "NEES 100 particles {:.2} vs 10 {:.2}",
         scores[2].1,
         scores[0].1
+    );
+}
+
+/// Seeds of the ring runs: 0, 1, …, 29, every one of them (none chosen or left out).
+const RING_SEEDS: u64 = 30;
+/// Highest landmark RMSE accepted on the ring with the true path (m): a tenth of slam_loop's
+/// σ_r (0.05 m). Each landmark is the mean of a few hundred readings from a known pose, about
+/// 1 mm per axis (measured 0.0015 m over the seeds, 0.0018 at worst).
+const TRUE_PATH_RMSE: f64 = 0.005;
+/// Highest mean landmark RMSE over the ring runs of the whole filter (m): slam_loop's σ_r.
+/// Measured 0.0316 m (the worst run 0.066, within [`LANDMARK_RMSE`]); EKF-SLAM 0.0099 m.
+const RING_MEAN_RMSE: f64 = 0.05;
+
+/// Highest distance from the pose FastSLAM publishes at the end of a ring run to the truth (m):
+/// slam_loop's σ_r. Measured at most 0.037 m (0.15 m with the importance weights left out).
+const RING_POSITION: f64 = 0.05;
+
+/// The map FastSLAM publishes (`localization/landmarks`, [`Estimator::write_landmarks`]),
+/// scored as the monitor scores it.
+fn published(est: &dyn Estimator) -> MapScore {
+    let mut out: Box<Landmarks> = bytemuck::zeroed_box();
+    est.write_landmarks(&mut out);
+    score_map(&out, &ring_beacons())
+}
+
+/// Estimator `kind` as the stack builds it for slam_loop with `seed` (FastSLAM: the default
+/// [`FastSlamConfig`], 100 particles, the map's noise and seed), after the 6,000 steps of the
+/// ring, odometry and beacon readings in one step at a time: its published map, scored, and the
+/// distance (m) from its published position to the true one.
+fn ring_run(kind: EstimatorKind, seed: u64) -> (MapScore, f64) {
+    let map = ring_map(seed);
+    let mut est = build_estimator(kind, &map).expect("builds");
+    let mut at = (0.0, 0.0);
+    run_ring(seed, RING_STEPS, |odom, beacons, truth| {
+        est.step(&Readings::of(odom).with_beacons(Some(beacons)));
+        at = (truth.x, truth.y);
+    });
+    let pose = est.pose();
+    (
+        published(est.as_ref()),
+        (pose.x - at.0).hypot(pose.y - at.1),
+    )
+}
+
+/// The maps of [`ring_run`] over the seeds, and the largest position error of their runs.
+fn ring_runs(kind: EstimatorKind) -> (Vec<MapScore>, f64) {
+    (0..RING_SEEDS).map(|seed| ring_run(kind, seed)).fold(
+        (Vec::new(), 0.0),
+        |(mut maps, worst), (map, error)| {
+            maps.push(map);
+            (maps, f64::max(worst, error))
+        },
+    )
+}
+
+/// FastSLAM with the stack's configuration on the ring, but every particle on the true path: the
+/// proposal noiseless (σ_v = σ_ω = 0, no additive floor) and fed the true v and ω, so the
+/// particles stay identical and what is left is the landmark EKFs (Thrun Table 13.1 lines 7–17).
+fn true_path_run(seed: u64) -> MapScore {
+    let map = ring_map(seed);
+    let mut noise = NoiseModel::from_map(&map);
+    (noise.odom_v_std, noise.odom_omega_std) = (0.0, 0.0);
+    noise.state_noise_rate = [0.0; 3];
+    let mut slam = FastSlam::new(
+        Pose2::new(map.start_x, map.start_y, map.start_theta),
+        noise,
+        SLAM_CAPACITY,
+        SlamConfig::default(),
+        FastSlamConfig {
+            seed,
+            ..FastSlamConfig::default()
+        },
+    );
+    run_ring(seed, RING_STEPS, |_, beacons, truth| {
+        slam.predict(truth.v, truth.omega, map.dt)
+            .expect("plausible control");
+        slam.correct(beacons.readings());
+    });
+    let mut out: Box<Landmarks> = bytemuck::zeroed_box();
+    write_landmarks(EstimatorKind::FastSlam, slam.landmarks(), &mut out);
+    score_map(&out, &ring_beacons())
+}
+
+/// Prints one row per seed and the summary; returns (mean of the runs' mean NEES, mean RMSE,
+/// runs whose mean NEES lies in the monitor's interval).
+fn ring_table(name: &str, scores: &[MapScore]) -> (f64, f64, usize) {
+    println!("{name}: seed | landmarks | RMSE (m) | mean NEES | monitor's 95% interval");
+    for (seed, s) in scores.iter().enumerate() {
+        let (lo, hi) = mean_nees_interval(s.nees_samples);
+        let verdict = if s.nees_inside() { "inside" } else { "outside" };
+        println!(
+            "{seed:4} | {:9} | {:8.4} | {:9.2} | [{lo:.2}, {hi:.2}] {verdict}",
+            s.landmarks, s.rmse, s.nees
+        );
+    }
+    let n = scores.len() as f64;
+    let nees = scores.iter().map(|s| s.nees).sum::<f64>() / n;
+    let rmse = scores.iter().map(|s| s.rmse).sum::<f64>() / n;
+    let inside = scores.iter().filter(|s| s.nees_inside()).count();
+    let (lo, hi) = mean_nees_interval(scores.len());
+    println!(
+        "{name}: mean NEES {nees:.2} (over {} runs 95% in [{lo:.2}, {hi:.2}]), mean RMSE \
+         {rmse:.4} m, {inside}/{} runs inside the monitor's interval",
+        scores.len(),
+        scores.len()
+    );
+    (nees, rmse, inside)
+}
+
+/// The landmark half of FastSLAM at slam_loop's rate and noise: on the true path (see
+/// [`true_path_run`]) the map the stack would publish is consistent run by run, its mean NEES in
+/// the monitor's interval [χ²₄₈(0.025)/24, χ²₄₈(0.975)/24] = [1.28, 2.88] in at least 90% of
+/// the runs. That interval assumes the 24 landmarks' errors independent, which they are given
+/// the path: each is its own readings' noise. Measured: 30 of 30 inside, mean 1.99, RMSE 0.0015
+/// m. It fails with the bearing row of the landmark Jacobian ∂h/∂m negated (0 of 30, NEES
+/// ~2,800), with Q_t a quarter of the sensor's in the update (0 of 30, 7.9) or four times it
+/// (0 of 30, 0.50).
+#[test]
+fn on_the_true_path_fastslams_landmarks_are_consistent_at_slam_loops_rate() {
+    let scores: Vec<MapScore> = (0..RING_SEEDS).map(true_path_run).collect();
+    let (_, _, inside) = ring_table("FastSLAM on the true path", &scores);
+    for (seed, s) in scores.iter().enumerate() {
+        assert_eq!(
+            s.landmarks,
+            ring_beacons().len(),
+            "seed {seed}: every beacon mapped"
+        );
+        assert_eq!(
+            s.nees_samples, s.landmarks,
+            "seed {seed}: every Σ positive definite"
+        );
+        assert!(
+            s.rmse < TRUE_PATH_RMSE,
+            "seed {seed}: RMSE {:.4} m, not within {TRUE_PATH_RMSE} m",
+            s.rmse
+        );
+    }
+    assert!(
+        10 * inside >= 9 * scores.len(),
+        "{inside} of {} runs with the mean NEES inside the monitor's interval",
+        scores.len()
+    );
+}
+
+/// FastSLAM as the stack runs it on slam_loop (100 particles, 100 Hz, 6,000 steps) maps every
+/// beacon, each run within [`LANDMARK_RMSE`] (the stack test's bound) and on average within
+/// [`RING_MEAN_RMSE`]. The table it prints carries the NEES too: mean 1,500, no run inside
+/// the monitor's interval (see the next test).
+#[test]
+fn fastslam_maps_the_slam_loop_ring_within_the_stacks_bound() {
+    let (scores, worst_position) = ring_runs(EstimatorKind::FastSlam);
+    let (_, rmse, _) = ring_table("FastSLAM", &scores);
+    println!("FastSLAM: largest final position error {worst_position:.4} m");
+    for (seed, s) in scores.iter().enumerate() {
+        assert_eq!(
+            s.landmarks,
+            ring_beacons().len(),
+            "seed {seed}: every beacon mapped"
+        );
+        assert!(
+            s.rmse < LANDMARK_RMSE,
+            "seed {seed}: RMSE {:.4} m, not within {LANDMARK_RMSE} m",
+            s.rmse
+        );
+    }
+    assert!(
+        rmse < RING_MEAN_RMSE,
+        "mean RMSE {rmse:.4} m, not within {RING_MEAN_RMSE} m"
+    );
+    assert!(
+        worst_position < RING_POSITION,
+        "final position error up to {worst_position:.4} m, not within {RING_POSITION} m"
+    );
+}
+
+/// Consistency of the map FastSLAM publishes on slam_loop, held as the test of consistency over
+/// runs (Bar-Shalom, Li & Kirubarajan §5.4, as docs/algorithms.md §6.9.5 holds the fused maps):
+/// the mean over the runs of each run's mean landmark NEES lies in
+/// [χ²₂ᵣ(0.025)/R, χ²₂ᵣ(0.975)/R], [1.35, 2.78] for R = 30. Not run by default: it fails,
+/// measured 1,500 (no run inside the monitor's interval), from FastSLAM 1.0's path degeneracy
+/// (Bailey, Nieto & Nebot 2006): resampling leaves the particles one ancestor, so for 20 of the
+/// 24 landmarks the spread term of the mixture is 0 and Σ is one path's, about 1 mm against
+/// errors of 1–6 cm; NEES 2.4 after 300 steps, 18 after 3,000, then 780 once the loop closes at
+/// about 4,500. More particles do not mend it (1,000: 414; 3,000: 305; 10,000: 368 over the
+/// first five seeds), and no resampling threshold does (1.0 … 0: 2,770 … 890). The run by run
+/// criterion, the mean NEES inside the monitor's interval in 90% of the runs, is not the target:
+/// that interval assumes the landmarks' errors independent, and on the estimated path they share
+/// its drift; EKF-SLAM meets it in 17 of these 30 runs and the batch GraphSLAM optimum in 15
+/// (see the next test).
+#[test]
+#[ignore = "fails: FastSLAM 1.0's path degeneracy (mean landmark NEES ~1,500 on this ring)"]
+fn fastslam_map_is_consistent_on_the_slam_loop_ring() {
+    let (scores, _) = ring_runs(EstimatorKind::FastSlam);
+    let (nees, _, _) = ring_table("FastSLAM", &scores);
+    let (lo, hi) = mean_nees_interval(scores.len());
+    assert!(
+        (lo..=hi).contains(&nees),
+        "mean landmark NEES over {} runs {nees:.2}, not in [{lo:.2}, {hi:.2}]",
+        scores.len()
+    );
+}
+
+/// The criterion of the test above is one a consistent SLAM estimator meets on these runs:
+/// EKF-SLAM (first-estimates Jacobians, docs/algorithms.md §6.9.2) on the same 30 worlds has a
+/// mean landmark NEES of 1.80 in [1.35, 2.78], while its runs' means spread from 0.5 to 4.2
+/// (17 of 30 inside the monitor's interval: the run by run target is out of its reach too).
+#[test]
+fn ekf_slam_meets_the_ring_consistency_criterion_on_the_same_runs() {
+    let (scores, _) = ring_runs(EstimatorKind::EkfSlam);
+    let (nees, _, _) = ring_table("EKF-SLAM", &scores);
+    let (lo, hi) = mean_nees_interval(scores.len());
+    assert!(
+        (lo..=hi).contains(&nees),
+        "mean landmark NEES over {} runs {nees:.2}, not in [{lo:.2}, {hi:.2}]",
+        scores.len()
     );
 }

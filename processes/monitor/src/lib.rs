@@ -125,7 +125,7 @@ pub(crate) struct Scene {
 }
 
 /// Coverage fractions whose first step the summary reports (`coverage_steps`).
-pub const COVERAGE_MILESTONES: [f64; 3] = [0.5, 0.9, 0.95];
+pub const COVERAGE_MILESTONES: [f64; 4] = [0.5, 0.9, 0.95, 0.99];
 
 /// Coverage milestones are checked on the grids of every this many steps (0.1 s at 100 Hz) and
 /// on the last one; the grid scores are otherwise computed when asked for. Scanning both grids
@@ -156,7 +156,7 @@ pub struct Monitor {
     /// The score of `grid`, computed when first asked for (`None`: not yet).
     grid_score: Cell<Option<GridScore>>,
     /// Step at which coverage first reached each of [`COVERAGE_MILESTONES`].
-    coverage_steps: [Option<u64>; 3],
+    coverage_steps: [Option<u64>; COVERAGE_MILESTONES.len()],
     /// The tick of `grid`.
     grid_tick: u64,
     contact: LatestGrid,
@@ -230,7 +230,7 @@ impl Monitor {
                 received: false,
             },
             grid_score: Cell::new(None),
-            coverage_steps: [None; 3],
+            coverage_steps: [None; COVERAGE_MILESTONES.len()],
             grid_tick: 0,
             contact: LatestGrid {
                 cells: vec![0; n],
@@ -411,7 +411,7 @@ impl Monitor {
     }
 
     /// The recorded milestones, and those the current grid reaches.
-    fn milestones(&self) -> [Option<u64>; 3] {
+    fn milestones(&self) -> [Option<u64>; COVERAGE_MILESTONES.len()] {
         let coverage = self.coverage();
         let mut steps = self.coverage_steps;
         for (milestone, threshold) in steps.iter_mut().zip(COVERAGE_MILESTONES) {

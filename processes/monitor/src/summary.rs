@@ -93,7 +93,7 @@ pub struct Summary {
     /// FNV-1a 64 of the final contact grid's cells, 16 hex digits.
     pub contact_hash: Option<String>,
     pub reachable_free_cells: u64,
-    /// Step at which coverage first reached 0.5, 0.9 and 0.95 (`null`: never), checked every
+    /// Step at which coverage first reached 0.5, 0.9, 0.95 and 0.99 (`null`: never), checked every
     /// `COVERAGE_EVERY` (10) steps and on the last grid.
     pub coverage_steps: BTreeMap<String, Option<u64>>,
     /// Why the world ended the run (`ticks`, `goal_reached`, `stopped`,

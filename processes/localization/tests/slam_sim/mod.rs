@@ -3,6 +3,8 @@
 
 #![allow(dead_code)] // Each test binary uses part of it.
 
+pub mod ring;
+
 use mole_localization::NoiseModel;
 use mole_localization::models::unicycle_g;
 use mole_types::{BeaconReading, BeaconSite, Beacons, Odom, WorldMap, wrap_angle};
