@@ -3,10 +3,12 @@
 //! reachable when a 4-connected path of free cells leads to it from the start.
 //!
 //! Scenario tests use it to prove every scenario is connected; the monitor can use it as the
-//! ground truth for "the reachable free area".
+//! ground truth for "the reachable free area"; [`FreeSpace::shortest_path`] gives the optimal path
+//! length that BARN's optimal time `T_opt = length / max_speed` is made of (Perille et al. 2020).
 
 use crate::scenario::{Goal, Scenario, distance_to_square};
-use std::collections::VecDeque;
+use std::cmp::{Ordering, Reverse};
+use std::collections::{BinaryHeap, VecDeque};
 
 /// The disk centred on this cell overlaps a wall or an obstacle.
 pub const BLOCKED: u8 = 0;
@@ -122,6 +124,111 @@ impl FreeSpace {
         })
     }
 
+    /// Length (m) of the shortest 8-connected free-cell path between two points (A*), or `None`.
+    pub fn shortest_path(&self, from: (f64, f64), to: (f64, f64)) -> Option<f64> {
+        // A* (Hart, Nilsson and Raphael 1968) with the octile distance; a diagonal step only
+        // when both orthogonal neighbours are free (no corner cutting). The length runs from
+        // cell centre to cell centre. A point whose own cell is blocked although its disk may be
+        // free (the raster is coarser than the geometry) starts from its nearest free
+        // 8-neighbour, as the flood fill does. BARN's optimal time is this length over the
+        // robot's top speed (Perille et al. 2020).
+        let start = self.free_cell_near(from.0, from.1)?;
+        let goal = self.free_cell_near(to.0, to.1)?;
+        let (w, h) = (self.width, self.height);
+        let res = self.resolution;
+        let diagonal = res * std::f64::consts::SQRT_2;
+        let (gi, gj) = ((goal % w) as f64, (goal / w) as f64);
+        // The octile distance: admissible and consistent on this 8-connected grid.
+        let heuristic = |k: usize| {
+            let dx = ((k % w) as f64 - gi).abs();
+            let dy = ((k / w) as f64 - gj).abs();
+            let (lo, hi) = if dx < dy { (dx, dy) } else { (dy, dx) };
+            (hi - lo) * res + lo * diagonal
+        };
+        let free = |i: i64, j: i64| {
+            i >= 0
+                && j >= 0
+                && (i as usize) < w
+                && (j as usize) < h
+                && self.cells[j as usize * w + i as usize] != BLOCKED
+        };
+        let mut best = vec![f64::INFINITY; w * h];
+        let mut done = vec![false; w * h];
+        let mut open = BinaryHeap::new();
+        best[start] = 0.0;
+        open.push(Reverse(Entry(heuristic(start), start)));
+        while let Some(Reverse(Entry(_, k))) = open.pop() {
+            if done[k] {
+                continue;
+            }
+            if k == goal {
+                return Some(best[k]);
+            }
+            done[k] = true;
+            let (i, j) = ((k % w) as i64, (k / w) as i64);
+            for (di, dj) in [
+                (1, 0),
+                (-1, 0),
+                (0, 1),
+                (0, -1),
+                (1, 1),
+                (1, -1),
+                (-1, 1),
+                (-1, -1),
+            ] {
+                let (ni, nj) = (i + di, j + dj);
+                if !free(ni, nj) {
+                    continue;
+                }
+                let step = if di != 0 && dj != 0 {
+                    // No corner cutting: both orthogonal neighbours must be free.
+                    if !free(i + di, j) || !free(i, j + dj) {
+                        continue;
+                    }
+                    diagonal
+                } else {
+                    res
+                };
+                let n = nj as usize * w + ni as usize;
+                let g = best[k] + step;
+                if !done[n] && g < best[n] {
+                    best[n] = g;
+                    open.push(Reverse(Entry(g + heuristic(n), n)));
+                }
+            }
+        }
+        None
+    }
+
+    /// The point's cell if it is not blocked, else its free 8-neighbour nearest to the point.
+    fn free_cell_near(&self, x: f64, y: f64) -> Option<usize> {
+        let (ci, cj) = self.cell(x, y)?;
+        let k = cj * self.width + ci;
+        if self.cells[k] != BLOCKED {
+            return Some(k);
+        }
+        let res = self.resolution;
+        let mut nearest: Option<(f64, usize)> = None;
+        for dj in -1..=1_i64 {
+            for di in -1..=1_i64 {
+                let (i, j) = (ci as i64 + di, cj as i64 + dj);
+                if i < 0 || j < 0 || i as usize >= self.width || j as usize >= self.height {
+                    continue;
+                }
+                let n = j as usize * self.width + i as usize;
+                if self.cells[n] == BLOCKED {
+                    continue;
+                }
+                let (cx, cy) = ((i as f64 + 0.5) * res - x, (j as f64 + 0.5) * res - y);
+                let d = cx * cx + cy * cy;
+                if nearest.is_none_or(|(best, _)| d < best) {
+                    nearest = Some((d, n));
+                }
+            }
+        }
+        nearest.map(|(_, n)| n)
+    }
+
     /// Marks every free cell 4-connected to the start's cell (or, when the raster blocks that
     /// cell although the start pose is free, to a free neighbour) as reachable.
     fn flood_from(&mut self, x: f64, y: f64) {
@@ -176,6 +283,30 @@ impl FreeSpace {
     }
 }
 
+/// A* queue entry: the estimated total length, then the cell (ordered by `f64::total_cmp`).
+#[derive(Debug, Clone, Copy)]
+struct Entry(f64, usize);
+
+impl PartialEq for Entry {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+
+impl Eq for Entry {}
+
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Entry {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.0.total_cmp(&other.0).then(self.1.cmp(&other.1))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -215,6 +346,171 @@ mod tests {
         let space = FreeSpace::new(&s);
         assert_eq!(space.count(FREE), 0);
         assert!(space.goal_reachable(&s.goal.unwrap()));
+    }
+
+    /// A wall of 1 m squares at x = 5 from y = 0 up to `top`.
+    fn walled(top: usize) -> Scenario {
+        let mut text = String::from("[start]\nx = 2.0\ny = 2.0\n");
+        for k in 0..top {
+            text.push_str(&format!(
+                "[[obstacles]]\nx = 5.0\ny = {}\nside = 1.0\n",
+                0.5 + k as f64
+            ));
+        }
+        parse_scenario(&text, Path::new("t.toml")).unwrap()
+    }
+
+    #[test]
+    fn shortest_path_in_the_open_is_the_straight_line() {
+        let s = parse_scenario("[sim]\n", Path::new("t.toml")).unwrap();
+        let space = FreeSpace::new(&s);
+        // 140 cells to the right: 7 m exactly (up to rounding).
+        let d = space.shortest_path((1.0, 5.0), (8.0, 5.0)).unwrap();
+        assert!((d - 7.0).abs() < 1e-9, "{d}");
+        // 100 diagonal steps: 5·√2 m.
+        let d = space.shortest_path((1.0, 1.0), (6.0, 6.0)).unwrap();
+        assert!((d - 5.0 * 2f64.sqrt()).abs() < 1e-9, "{d}");
+        assert_eq!(space.shortest_path((3.0, 3.0), (3.01, 3.01)), Some(0.0));
+        // Symmetric.
+        let there = space.shortest_path((1.3, 2.7), (8.1, 6.4)).unwrap();
+        let back = space.shortest_path((8.1, 6.4), (1.3, 2.7)).unwrap();
+        assert!((there - back).abs() < 1e-9, "{there} {back}");
+    }
+
+    #[test]
+    fn shortest_path_goes_around_a_wall() {
+        let s = walled(8);
+        let space = FreeSpace::new(&s);
+        let d = space.shortest_path((2.0, 2.0), (8.0, 2.0)).unwrap();
+        // The true shortest path runs over the corners of the wall dilated by the radius 0.2,
+        // (4.3, 8.2) and (5.7, 8.2); the 8-connected one is at most 8.3% longer than a line.
+        let leg = (2.3f64 * 2.3 + 6.2 * 6.2).sqrt();
+        let euclid = 2.0 * leg + 1.4;
+        assert!(
+            d > euclid - 0.1 && d < euclid * 1.083 + 0.1,
+            "{d} against {euclid}"
+        );
+        // A lower wall: a shorter detour.
+        let lower = FreeSpace::new(&walled(4))
+            .shortest_path((2.0, 2.0), (8.0, 2.0))
+            .unwrap();
+        assert!(lower < d - 3.0, "{lower} {d}");
+    }
+
+    #[test]
+    fn shortest_path_is_none_when_nothing_joins_the_points() {
+        let s = walled(10);
+        let space = FreeSpace::new(&s);
+        assert_eq!(space.shortest_path((2.0, 2.0), (8.0, 2.0)), None);
+        // Outside the raster, or inside an obstacle with no free neighbour.
+        assert_eq!(space.shortest_path((2.0, 2.0), (12.0, 2.0)), None);
+        assert_eq!(space.shortest_path((2.0, 2.0), (-1.0, 2.0)), None);
+        assert_eq!(space.shortest_path((5.0, 3.0), (2.0, 2.0)), None);
+        assert_eq!(space.shortest_path((2.0, 2.0), (f64::NAN, 2.0)), None);
+        // The same side is still joined.
+        assert!(space.shortest_path((2.0, 2.0), (2.0, 9.0)).is_some());
+    }
+
+    /// A hand-made raster: `#` blocked, `.` free, top row first.
+    fn raster(rows: &[&str]) -> FreeSpace {
+        let height = rows.len();
+        let width = rows[0].len();
+        let mut cells = vec![FREE; width * height];
+        for (r, row) in rows.iter().enumerate() {
+            for (i, c) in row.bytes().enumerate() {
+                if c == b'#' {
+                    cells[(height - 1 - r) * width + i] = BLOCKED;
+                }
+            }
+        }
+        FreeSpace {
+            width,
+            height,
+            resolution: 1.0,
+            cells,
+        }
+    }
+
+    #[test]
+    fn shortest_path_cuts_no_corner() {
+        // From the lower-left cell to the one diagonal to it: the two cells between are blocked.
+        let space = raster(&[".#.", "#.#", ".#."]);
+        assert_eq!(space.shortest_path((0.5, 0.5), (1.5, 1.5)), None);
+        // One blocked side forbids the diagonal too: two straight steps instead.
+        let space = raster(&["...", "#..", "..."]);
+        let d = space.shortest_path((0.5, 0.5), (1.5, 1.5)).unwrap();
+        assert!((d - 2.0).abs() < 1e-12, "{d}");
+        let space = raster(&["...", "...", "..."]);
+        let d = space.shortest_path((0.5, 0.5), (1.5, 1.5)).unwrap();
+        assert!((d - 2f64.sqrt()).abs() < 1e-12, "{d}");
+        // Squeezed between two blocked cells: the long way round, six straight steps.
+        let space = raster(&["...", ".#.", "..#"]);
+        let d = space.shortest_path((1.5, 0.5), (2.5, 1.5)).unwrap();
+        assert!((d - 6.0).abs() < 1e-12, "{d}");
+    }
+
+    /// The plain Bellman–Ford relaxation over the same moves, as the reference for A*.
+    fn reference(space: &FreeSpace, from: usize, to: usize) -> Option<f64> {
+        let (w, h) = (space.width as i64, space.height as i64);
+        let free = |i: i64, j: i64| {
+            i >= 0 && j >= 0 && i < w && j < h && space.cells[(j * w + i) as usize] != BLOCKED
+        };
+        let mut dist = vec![f64::INFINITY; space.cells.len()];
+        dist[from] = 0.0;
+        loop {
+            let mut changed = false;
+            for k in 0..space.cells.len() {
+                let (i, j) = (k as i64 % w, k as i64 / w);
+                if !free(i, j) || dist[k].is_infinite() {
+                    continue;
+                }
+                for di in -1..=1 {
+                    for dj in -1..=1 {
+                        let diagonal = di != 0 && dj != 0;
+                        if (di, dj) == (0, 0)
+                            || !free(i + di, j + dj)
+                            || (diagonal && (!free(i + di, j) || !free(i, j + dj)))
+                        {
+                            continue;
+                        }
+                        let step = if diagonal { 2f64.sqrt() } else { 1.0 } * space.resolution;
+                        let n = ((j + dj) * w + i + di) as usize;
+                        if dist[k] + step < dist[n] - 1e-12 {
+                            dist[n] = dist[k] + step;
+                            changed = true;
+                        }
+                    }
+                }
+            }
+            if !changed {
+                break;
+            }
+        }
+        dist[to].is_finite().then_some(dist[to])
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+
+        /// A* finds the reference's length on random rasters, and `None` exactly where it does.
+        #[test]
+        fn shortest_path_is_the_shortest(
+            blocked in proptest::collection::vec(proptest::bool::weighted(0.3), 12 * 9),
+            from in 0usize..12 * 9,
+            to in 0usize..12 * 9,
+        ) {
+            let mut cells: Vec<u8> = blocked.iter().map(|&b| if b { BLOCKED } else { FREE }).collect();
+            cells[from] = FREE;
+            cells[to] = FREE;
+            let space = FreeSpace { width: 12, height: 9, resolution: 0.5, cells };
+            let centre = |k: usize| (((k % 12) as f64 + 0.5) * 0.5, ((k / 12) as f64 + 0.5) * 0.5);
+            let found = space.shortest_path(centre(from), centre(to));
+            let want = reference(&space, from, to);
+            match (found, want) {
+                (Some(a), Some(b)) => proptest::prop_assert!((a - b).abs() < 1e-9, "{} {}", a, b),
+                (a, b) => proptest::prop_assert_eq!(a, b),
+            }
+        }
     }
 
     #[test]
