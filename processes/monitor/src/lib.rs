@@ -7,6 +7,7 @@
 //! resolution. Per-message methods never allocate: every buffer is sized in [`Monitor::new`].
 
 mod ending;
+mod progress;
 mod render;
 mod slam;
 mod smoothed;
@@ -15,6 +16,7 @@ mod track;
 mod truth;
 
 pub use ending::{Ending, LOCKSTEP_DRAIN, RunEnding};
+pub use progress::{LIVELOCK_S, Progress};
 pub use slam::{CHI2_2_95, SlamSummary, mean_nees_interval};
 pub use summary::{
     FaultRecord, LatencyUs, RunMeta, Summary, SwapRecord, TopicSummary, UpdateUs, fnv1a64,
@@ -26,8 +28,9 @@ use mole_types::{
     BeaconSite, CELL_FREE, CELL_OCCUPIED, DIRECTION_SUBSCRIBE, EndReason, EstimatorKind,
     GRID_CONTACT, GRID_FRONTIER, Grid, Invalid, Landmarks, MAX_PARTICLES, MAX_PATH,
     MAX_TOPIC_STATS, MODE_STALLED, Message, NAME_LEN, Particles, PlanStatus, Pose, RunStatus,
-    STATUS_EXPLORATION_COMPLETE, Square, Stats, TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, TopicStats,
-    Trajectory, Truth, WorldMap, read_name, wrap_angle,
+    STATUS_EXPLORATION_COMPLETE, STATUS_HAS_FRONTIER, STATUS_HAS_GOAL, Square, Stats,
+    TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, TopicStats, Trajectory, Truth, WorldMap, read_name,
+    wrap_angle,
 };
 use slam::LandmarkMap;
 use smoothed::SmoothedTrajectory;
@@ -195,6 +198,8 @@ pub struct Monitor {
     plan_mode: u32,
     /// Times the planner reported a stall (MODE_STALLED).
     stalls: u32,
+    /// New area or an approach to the planner's target, or neither (a livelock).
+    progress: Progress,
     bounces: u32,
     exploration_complete: bool,
     plan_path: Vec<[f32; 2]>,
@@ -265,6 +270,7 @@ impl Monitor {
             stats: Vec::with_capacity(MAX_PROCESSES),
             plan_mode: 0,
             stalls: 0,
+            progress: Progress::new(map.dt),
             bounces: 0,
             exploration_complete: false,
             plan_path: Vec::with_capacity(MAX_PATH),
@@ -297,6 +303,7 @@ impl Monitor {
     pub fn on_truth(&mut self, truth: &Truth) {
         let tick = truth.header.tick;
         self.true_track.push(truth.x, truth.y);
+        self.progress.on_position(tick, truth.x, truth.y);
         match self.last_truth {
             Some((last, x, y)) if tick > last => {
                 self.path_length += (truth.x - x).hypot(truth.y - y);
@@ -408,6 +415,8 @@ impl Monitor {
     /// Marks the milestones the current grid's coverage reached first.
     fn record_milestones(&mut self) {
         self.coverage_steps = self.milestones();
+        let explored = self.grid_score().explored_reachable;
+        self.progress.on_explored(self.grid_tick, explored);
     }
 
     /// The recorded milestones, and those the current grid reaches.
@@ -592,6 +601,14 @@ impl Monitor {
         self.plan_mode = s.mode;
         self.bounces = s.bounces;
         self.exploration_complete |= s.flags & STATUS_EXPLORATION_COMPLETE != 0;
+        let target = if s.flags & STATUS_HAS_FRONTIER != 0 {
+            Some((s.frontier_x, s.frontier_y))
+        } else if s.flags & STATUS_HAS_GOAL != 0 {
+            Some((s.goal_x, s.goal_y))
+        } else {
+            None
+        };
+        self.progress.on_target(target);
         self.plan_path.clear();
         self.plan_path.extend_from_slice(s.path());
     }
@@ -730,6 +747,10 @@ impl Monitor {
             },
             bounces: self.bounces,
             stalls: self.stalls,
+            longest_without_progress_s: finite(
+                self.progress.longest_ticks() as f64 * self.scene.dt,
+            ),
+            livelocks: self.progress.livelocks(),
             grid_hash: hash(&self.grid),
             contact_hash: hash(&self.contact),
             reachable_free_cells: self.raster.reachable_free,

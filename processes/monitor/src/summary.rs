@@ -88,6 +88,14 @@ pub struct Summary {
     pub bounces: u32,
     /// Times the planner reported a stall in a local minimum.
     pub stalls: u32,
+    /// The longest stretch without progress (no new explored area, no approach of 0.25 m to the
+    /// planner's target) (s).
+    #[serde(default)]
+    pub longest_without_progress_s: f64,
+    /// Stretches without progress of at least `LIVELOCK_S` (30 s): the robot circling or
+    /// switching targets it never reaches.
+    #[serde(default)]
+    pub livelocks: u32,
     /// FNV-1a 64 of the final frontier grid's cells, 16 hex digits.
     pub grid_hash: Option<String>,
     /// FNV-1a 64 of the final contact grid's cells, 16 hex digits.
