@@ -223,6 +223,42 @@ fn a_goal_the_robot_cannot_reach_or_no_goal_is_refused() {
     assert!(err.contains(apf) && err.contains("--goal"), "{err}");
 }
 
+/// Frontier exploration in a world with no lidar is refused before anything starts (it would
+/// see no frontier and report an exploration it never did), naming the world and the planner
+/// that explores by touch; the planning process refuses it too when started by hand.
+#[test]
+fn frontier_without_a_lidar_is_refused() {
+    let frontier = PlannerKind::Frontier.name();
+    let args = [
+        "--planner",
+        frontier,
+        "--scenario",
+        "scenarios/dark_room.toml",
+    ];
+    let output = refused_up("dark-frontier", &args);
+    let err = stderr_of(&output);
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("`dark_room` has no lidar ([sensors.lidar] beams = 0)")
+            && err.contains("--planner random-walk"),
+        "{err}"
+    );
+
+    // Swapped in with its own --planner, the planning process refuses the map it is given.
+    let namespace = unique_namespace("dark-frontier-swap");
+    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+    let swap = format!("planning=mole-planning --planner {frontier}");
+    let args = ["--scenario", "scenarios/dark_room.toml", "--swap", &swap];
+    let output = refused(mole_command(&namespace, &out, &args));
+    let logs = logs(&out);
+    let _ = std::fs::remove_dir_all(&out);
+    assert_eq!(output.status.code(), Some(2), "{}", stderr_of(&output));
+    assert!(
+        logs.contains("has no lidar ([sensors.lidar] beams = 0)"),
+        "{logs}"
+    );
+}
+
 /// `--swap` with an unknown role, a missing program or no command is refused in one line.
 #[test]
 fn swap_errors_are_one_clear_line() {

@@ -156,6 +156,25 @@ impl PlannerKind {
     pub const fn needs_goal(self) -> bool {
         matches!(self, PlannerKind::Apf | PlannerKind::Dwa)
     }
+
+    /// Whether it explores what the range sensor sees: frontier cells are the edge between the
+    /// free space a scan shows and the unknown (algorithms §5), so with no lidar there is never
+    /// a frontier and it would report an exploration it did not do.
+    pub const fn needs_range_sensor(self) -> bool {
+        matches!(self, PlannerKind::Frontier)
+    }
+
+    /// Why this planner cannot run with these sensors (`None`: it can), in one sentence for a
+    /// world named `world`.
+    pub fn refuses_sensors(self, sensors: &crate::SensorSpec, world: &str) -> Option<String> {
+        (self.needs_range_sensor() && sensors.lidar_beams == 0).then(|| {
+            format!(
+                "--planner {self} explores the frontier of what the lidar sees, but `{world}` has \
+                 no lidar ([sensors.lidar] beams = 0): explore it by touch with --planner {}",
+                PlannerKind::RandomWalk
+            )
+        })
+    }
 }
 
 choice! {

@@ -35,6 +35,13 @@ pub(super) fn prepare(args: &UpArgs) -> Result<Plan, Failure> {
     let (mut launch, scenario_path, scenario) = load_stack(args)?;
     give_the_bridge_its_settings(&mut launch)?;
     check_goal(launch.stack.planner, args.goal, &scenario)?;
+    if let Some(why) = launch
+        .stack
+        .planner
+        .refuses_sensors(&scenario.sensors, &scenario.name)
+    {
+        return Err(Failure::input(why));
+    }
     // No length at all: run until Ctrl-C.
     let ticks = match (launch.stack.ticks, launch.stack.duration_s) {
         (Some(ticks), _) => ticks,

@@ -62,6 +62,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
                 .goal
                 .or((map.has_goal == 1).then_some((map.goal_x, map.goal_y)));
             config.goal_tolerance = (map.has_goal == 1).then_some(map.goal_tolerance);
+            if let Some(why) = config.kind.refuses_sensors(&map.sensors, "this world") {
+                return Err(BadInput(why).into());
+            }
             // A planner that cannot be built is bad input (exit 2), not a crash to retry.
             let planner = mole_planning::build_planner(&config, RobotLimits::from(&map.robot))
                 .map_err(|e| BadInput(e.to_string()))?;
