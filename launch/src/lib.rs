@@ -10,6 +10,7 @@ pub mod bench_ipc;
 pub mod bench_stack;
 pub mod control;
 mod error;
+pub mod eval;
 pub mod export;
 pub mod fault;
 pub mod hot_swap;

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
 use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
 use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
+use mole_launch::eval::{EvalArgs, eval};
 use mole_launch::export::{ExportArgs, export};
 use mole_launch::fault::{FaultArgs, fault};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
@@ -53,6 +54,9 @@ enum Command {
     /// Write a recording again with Foxglove's well-known schemas (JSON), so Foxglove or
     /// Lichtblick shows it without a plug-in.
     Export(ExportArgs),
+    /// Run a planner and estimator over a family of generated worlds (lockstep, parallel jobs)
+    /// and report success, coverage, errors and consistency with 95% intervals.
+    Eval(EvalArgs),
     /// Measure latency and throughput.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -76,6 +80,7 @@ fn main() -> ExitCode {
         Command::Stop(args) => stop(&args),
         Command::Status(args) => status(&args),
         Command::Fault(args) => fault(&args),
+        Command::Eval(args) => eval(&args),
         Command::Top(args) => top(&args),
         Command::Record(args) => record(&args),
         Command::Replay(args) => replay(&args),

@@ -52,7 +52,7 @@ const RESUME_DIR: &str = "resume";
 
 /// A command-line value that is one of `names`, listed in `--help` and in the error for any
 /// other (the names come from the kind's one declaration, `mole_types::kinds`).
-fn choices<T: Clone + Send + Sync + 'static, E: std::fmt::Debug + 'static>(
+pub(crate) fn choices<T: Clone + Send + Sync + 'static, E: std::fmt::Debug + 'static>(
     names: &'static [&'static str],
     parse: fn(&str) -> Result<T, E>,
 ) -> impl clap::builder::TypedValueParser<Value = T> {
@@ -181,7 +181,7 @@ impl RunEnd {
 
 /// When started through `cargo run`, builds every process binary too (cargo builds only the
 /// package it runs), so `mole` never starts a stale or missing process.
-fn build_process_binaries(with_bridge: bool) -> Result<(), Failure> {
+pub(crate) fn build_process_binaries(with_bridge: bool) -> Result<(), Failure> {
     let (Some(cargo), Ok(exe)) = (std::env::var_os("CARGO"), std::env::current_exe()) else {
         return Ok(());
     };

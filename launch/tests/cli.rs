@@ -32,7 +32,7 @@ fn help_lists_every_subcommand() {
         listed_subcommands(&[]),
         [
             "up", "swap", "stop", "status", "fault", "top", "record", "replay", "view", "info",
-            "export", "bench", "help"
+            "export", "eval", "bench", "help"
         ]
     );
     assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
@@ -54,6 +54,7 @@ fn help_lists_every_subcommand() {
         &["view"],
         &["info"],
         &["export"],
+        &["eval"],
         &["bench", "ipc"],
         &["bench", "stack"],
     ] {

@@ -1,0 +1,340 @@
+//! `mole eval`: one planner and estimator over a family of generated worlds, each run in
+//! lockstep by its own `mole up` (parallel jobs, one namespace each); per-world metrics and their
+//! aggregates with 95% confidence intervals, as a table and as JSON, and `--check` against a
+//! stored baseline.
+//!
+//! The worlds are ordinary scenario files (`OUT/worlds/NAME.toml`), so any run can be repeated
+//! by hand with `mole up --mode lockstep --scenario OUT/worlds/NAME.toml --seed SEED`.
+
+pub mod metrics;
+
+use crate::parse_swap;
+use crate::up::{Failure, build_process_binaries, choices};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use metrics::{Aggregate, WorldInfo, WorldMetrics, aggregate, regressions};
+use mole_monitor::read_summary;
+use mole_types::{EstimatorKind, PlannerKind};
+use mole_world::{FreeSpace, Scenario, WorldSpec, generate, world_toml};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// Exploration runs (no goal to reach) end by themselves or after this many steps (300 s at
+/// 100 Hz).
+pub const EXPLORATION_TICKS: u64 = 30_000;
+/// A navigation run's limit is this many optimal times (BARN's upper clip, beyond which a run
+/// scores as slow as it can) plus [`NAVIGATION_SLACK_S`].
+const NAVIGATION_LIMIT_T_OPT: f64 = 8.0;
+/// Seconds added to a navigation limit, so a short world still leaves time to turn and start.
+const NAVIGATION_SLACK_S: f64 = 10.0;
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalArgs {
+    /// The world family: maze, rooms, clutter, cellular or corridors, each also `-dark` (no
+    /// lidar, no fix), e.g. `maze-dark`.
+    #[arg(long)]
+    pub family: String,
+    /// How many worlds, seeds `--first-seed` onwards.
+    #[arg(long, default_value_t = 50)]
+    pub worlds: u64,
+    /// The first world's seed.
+    #[arg(long, default_value_t = 0)]
+    pub first_seed: u64,
+    /// The planner (default: the launch file's).
+    #[arg(long, value_parser = choices(PlannerKind::NAMES, str::parse::<PlannerKind>))]
+    pub planner: Option<PlannerKind>,
+    /// The estimator (default: the launch file's).
+    #[arg(long, value_parser = choices(EstimatorKind::NAMES, str::parse::<EstimatorKind>))]
+    pub estimator: Option<EstimatorKind>,
+    /// Frontier's local planner, as `mole up --local-planner`.
+    #[arg(long, value_name = "dwa|apf")]
+    pub local_planner: Option<PlannerKind>,
+    /// Replace a role's process in every run, as `mole up --swap`.
+    #[arg(long = "swap", value_name = "ROLE=COMMAND")]
+    pub swaps: Vec<String>,
+    /// Worlds run at once (default: the machine's cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Steps per run (default: exploration 30,000; navigation 8 optimal times + 10 s).
+    #[arg(long)]
+    pub ticks: Option<u64>,
+    /// Where the worlds, the runs and their logs go.
+    #[arg(long, default_value = "runs/eval")]
+    pub out: PathBuf,
+    /// Write the per-world metrics and the aggregates as JSON.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Compare with a stored result (an earlier `--json`): exit 1 naming each metric whose mean
+    /// is worse than the baseline's 95% interval.
+    #[arg(long, value_name = "BASELINE")]
+    pub check: Option<PathBuf>,
+}
+
+/// What `--json` writes and `--check` reads.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EvalReport {
+    /// `maze`, `maze-dark`, …
+    pub family: String,
+    /// The family's parameters, `key = value`.
+    pub parameters: String,
+    /// The planner and estimator every run used (`default`: the launch file's).
+    pub planner: String,
+    pub estimator: String,
+    pub first_seed: u64,
+    pub worlds: Vec<WorldMetrics>,
+    pub aggregate: BTreeMap<String, Aggregate>,
+    /// Wall time of the whole suite (s) and the jobs it ran at once.
+    pub wall_time_s: f64,
+    pub jobs: usize,
+}
+
+/// One generated world, ready to run.
+struct Job {
+    info: WorldInfo,
+    scenario: PathBuf,
+}
+
+/// Runs the suite; exit 1 when a run failed or `--check` found a regression, 2 for bad input.
+pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
+    let spec = WorldSpec::parse(&args.family).map_err(Failure::input)?;
+    for swap in &args.swaps {
+        parse_swap(swap).map_err(|e| Failure::input(e.to_string()))?;
+    }
+    if args.worlds == 0 {
+        return Err(Failure::input("--worlds: expected at least 1"));
+    }
+    let baseline = args.check.as_deref().map(read_report).transpose()?;
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1);
+    let navigation = args.planner.is_some_and(PlannerKind::needs_goal);
+    let mut scenarios = Vec::new();
+    for seed in args.first_seed..args.first_seed + args.worlds {
+        let scenario = generate(&spec, seed).map_err(|e| Failure::run(e.to_string()))?;
+        let refusal = args
+            .planner
+            .and_then(|p| p.refuses_sensors(&scenario.sensors, &scenario.name));
+        if let Some(why) = refusal {
+            return Err(Failure::input(why));
+        }
+        scenarios.push((seed, scenario));
+    }
+    let worlds_dir = args.out.join("worlds");
+    std::fs::create_dir_all(&worlds_dir)
+        .map_err(|e| Failure::input(format!("{}: {e}", worlds_dir.display())))?;
+    let mut suite = Vec::new();
+    for (seed, scenario) in scenarios {
+        let path = worlds_dir.join(format!("{}.toml", scenario.name));
+        std::fs::write(&path, world_toml(&spec, seed, &scenario))
+            .map_err(|e| Failure::run(format!("{}: {e}", path.display())))?;
+        suite.push(job(&scenario, path, seed, navigation, args.ticks));
+    }
+    build_process_binaries(false)?;
+    let started = std::time::Instant::now();
+    let results = run_all(args, &suite, jobs);
+    let report = EvalReport {
+        family: spec.label(),
+        parameters: spec.describe(),
+        planner: args.planner.map_or("default".into(), |p| p.to_string()),
+        estimator: args.estimator.map_or("default".into(), |e| e.to_string()),
+        first_seed: args.first_seed,
+        aggregate: aggregate(&results),
+        worlds: results,
+        wall_time_s: started.elapsed().as_secs_f64(),
+        jobs,
+    };
+    print_report(&report);
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&report).expect("a report serialises");
+        std::fs::write(path, text + "\n")
+            .map_err(|e| Failure::run(format!("{}: {e}", path.display())))?;
+    }
+    let failed = report.worlds.iter().filter(|w| w.exit_code != 0).count();
+    let mut problems = Vec::new();
+    if failed > 0 {
+        problems.push(format!(
+            "{failed} of {} runs failed (their logs are in {})",
+            report.worlds.len(),
+            args.out.join("runs").display()
+        ));
+    }
+    if let Some(baseline) = &baseline {
+        for found in regressions(&baseline.aggregate, &report.aggregate) {
+            problems.push(match found {
+                Ok(r) => format!("worse than the baseline: {r}"),
+                Err(e) => format!("worse than the baseline: {e}"),
+            });
+        }
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(Failure::run(problems.join("\n")))
+    }
+}
+
+/// A world's job: its limit and its optimal time, from its free space.
+fn job(scenario: &Scenario, path: PathBuf, seed: u64, navigation: bool, ticks: Option<u64>) -> Job {
+    let t_opt_s = scenario.goal.as_ref().and_then(|goal| {
+        let length = FreeSpace::new(scenario)
+            .shortest_path((scenario.start.x, scenario.start.y), (goal.x, goal.y))?;
+        Some(length / scenario.robot.max_speed)
+    });
+    let ticks = ticks.unwrap_or_else(|| match t_opt_s {
+        Some(t_opt) if navigation => {
+            ((NAVIGATION_LIMIT_T_OPT * t_opt + NAVIGATION_SLACK_S) / scenario.dt).ceil() as u64
+        }
+        _ => EXPLORATION_TICKS,
+    });
+    Job {
+        info: WorldInfo {
+            name: scenario.name.clone(),
+            seed,
+            t_opt_s: t_opt_s.filter(|_| navigation),
+            time_limit_s: ticks as f64 * scenario.dt,
+            ticks_limit: ticks,
+        },
+        scenario: path,
+    }
+}
+
+/// Runs every job, `jobs` at a time, with a progress bar; Ctrl-C lets the running ones finish
+/// and starts no more.
+fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> Vec<WorldMetrics> {
+    let bar = ProgressBar::new(suite.len() as u64).with_style(
+        ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} worlds {elapsed_precise} eta {eta} {msg}",
+        )
+        .expect("a valid template"),
+    );
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let interrupted = interrupted.clone();
+        // A second handler cannot be set when the process already has one; Ctrl-C then just
+        // reaches the children, which end their runs.
+        let _ = ctrlc::set_handler(move || interrupted.store(true, Ordering::SeqCst));
+    }
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<WorldMetrics>>> = Mutex::new(vec![None; suite.len()]);
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.min(suite.len()) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::SeqCst);
+                    if i >= suite.len() || interrupted.load(Ordering::SeqCst) {
+                        break;
+                    }
+                    let metrics = run_one(args, &suite[i], i);
+                    if metrics.exit_code != 0 {
+                        bar.println(format!(
+                            "{}: mole up exited with {}",
+                            metrics.world, metrics.exit_code
+                        ));
+                    }
+                    results.lock().expect("no job panics")[i] = Some(metrics);
+                    bar.inc(1);
+                }
+            });
+        }
+    });
+    bar.finish_and_clear();
+    results
+        .into_inner()
+        .expect("no job panics")
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
+/// One world's run by a `mole up` of its own, in a namespace of its own.
+fn run_one(args: &EvalArgs, job: &Job, index: usize) -> WorldMetrics {
+    let out = args.out.join("runs").join(&job.info.name);
+    let log_path = args.out.join("runs").join(format!("{}.log", job.info.name));
+    let exe = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("mole"));
+    let mut command = Command::new(exe);
+    command
+        .args(["up", "--quiet", "--mode", "lockstep", "--scenario"])
+        .arg(&job.scenario)
+        .args(["--ticks", &job.info.ticks_limit.to_string()])
+        .args(["--seed", &job.info.seed.to_string()])
+        .args([
+            "--namespace",
+            &format!("eval{}-{index}", std::process::id()),
+        ])
+        .arg("--out")
+        .arg(&out);
+    if let Some(planner) = args.planner {
+        command.args(["--planner", &planner.to_string()]);
+    }
+    if let Some(estimator) = args.estimator {
+        command.args(["--estimator", &estimator.to_string()]);
+    }
+    if let Some(local) = args.local_planner {
+        command.args(["--local-planner", &local.to_string()]);
+    }
+    for swap in &args.swaps {
+        command.args(["--swap", swap]);
+    }
+    // The binaries were built once, before the first run; each run must not build again.
+    command.env_remove("CARGO").stdin(Stdio::null());
+    let log = std::fs::create_dir_all(out.parent().unwrap_or(Path::new(".")))
+        .and_then(|()| std::fs::File::create(&log_path));
+    let status = match log {
+        Ok(log) => match log.try_clone() {
+            Ok(err) => command.stdout(log).stderr(err).status(),
+            Err(e) => Err(e),
+        },
+        Err(e) => Err(e),
+    };
+    let exit_code = match status {
+        Ok(status) => status.code().unwrap_or(-1),
+        Err(e) => {
+            tracing::warn!(world = %job.info.name, "cannot run mole up: {e}");
+            -1
+        }
+    };
+    match read_summary(&out.join("summary.json")) {
+        Ok(summary) if exit_code == 0 => WorldMetrics::of(&job.info, &summary, exit_code),
+        _ => WorldMetrics::failed(&job.info, exit_code),
+    }
+}
+
+/// A stored report, for `--check`: a file that is not one is bad input, named.
+fn read_report(path: &Path) -> Result<EvalReport, Failure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Failure::input(format!("--check {}: {e}", path.display())))?;
+    serde_json::from_str(&text).map_err(|e| {
+        Failure::input(format!(
+            "--check {}: not a mole eval report ({e}), expected a file `mole eval --json` wrote",
+            path.display()
+        ))
+    })
+}
+
+/// The aggregates as a table on standard output.
+fn print_report(report: &EvalReport) {
+    println!(
+        "{} worlds of `{}`, planner {}, estimator {}, {:.0} s on {} jobs",
+        report.worlds.len(),
+        report.family,
+        report.planner,
+        report.estimator,
+        report.wall_time_s,
+        report.jobs
+    );
+    println!(
+        "{:<26} {:>4} {:>10} {:>23} {:>10}",
+        "metric", "n", "mean", "95% interval", "median"
+    );
+    for (name, a) in &report.aggregate {
+        println!(
+            "{name:<26} {:>4} {:>10.4} [{:>10.4}, {:>10.4}] {:>10.4}",
+            a.n, a.mean, a.ci95[0], a.ci95[1], a.median
+        );
+    }
+}

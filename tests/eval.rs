@@ -1,0 +1,165 @@
+//! `mole eval`: a suite of generated worlds runs end to end, each world's scenario file repeats
+//! its run with a plain `mole up`, a baseline it does worse than fails it naming the metric, and
+//! bad input is refused before any world runs.
+
+use mole_integration_tests::*;
+use std::path::Path;
+use std::process::Command;
+
+/// Two clutter worlds with DWA: small enough for the suite, a navigation family (a goal, T_opt).
+const SUITE: [&str; 8] = [
+    "eval",
+    "--family",
+    "clutter",
+    "--worlds",
+    "2",
+    "--planner",
+    "dwa",
+    "--jobs",
+];
+
+fn eval_command(out: &Path, extra: &[&str]) -> Command {
+    let mut command = Command::new(bin_dir().join("mole"));
+    command
+        .current_dir(workspace())
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .args(SUITE)
+        .arg("2")
+        .arg("--out")
+        .arg(out)
+        .args(extra);
+    command
+}
+
+fn report(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("the report")).expect("JSON")
+}
+
+/// The suite runs both worlds, reports them and their aggregates; a world's file, run again by
+/// `mole up`, ends as the suite's run did; a baseline whose RMSE interval the run misses fails
+/// `--check` with exit 1 naming that metric.
+#[test]
+fn a_suite_runs_reports_repeats_and_checks_against_a_baseline() {
+    let _serial = serial();
+    let before = shm_files();
+    let dir = TempDir::new("eval");
+    let out = dir.0.join("suite");
+    let json = dir.0.join("report.json");
+    let output = eval_command(&out, &["--json", json.to_str().unwrap()])
+        .output()
+        .expect("run mole eval");
+    assert!(output.status.success(), "{}", output_text(&output));
+    let r = report(&json);
+    let worlds = r["worlds"].as_array().expect("worlds");
+    assert_eq!(worlds.len(), 2, "{r}");
+    for w in worlds {
+        assert_eq!(w["exit_code"], 0, "{w}");
+        assert!(
+            w["barn_score"].as_f64().is_some(),
+            "a navigation world has a score: {w}"
+        );
+    }
+    assert_eq!(r["aggregate"]["finished"]["n"], 2);
+    assert_eq!(r["aggregate"]["finished"]["mean"], 1.0);
+
+    // The first world again, by hand, from its scenario file: the same summary.
+    let name = worlds[0]["world"].as_str().unwrap();
+    let scenario = out.join("worlds").join(format!("{name}.toml"));
+    let again = dir.0.join("again");
+    let ns = unique_namespace("eval-again");
+    let status = mole_command(
+        &ns,
+        &again,
+        &[
+            "--mode",
+            "lockstep",
+            "--planner",
+            "dwa",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--seed",
+            &worlds[0]["seed"].to_string(),
+            "--ticks",
+            &worlds[0]["ticks_limit"].to_string(),
+        ],
+    )
+    .status()
+    .expect("run mole up");
+    assert!(status.success());
+    let first = deterministic(&summary(&out.join("runs").join(name)));
+    let by_hand = deterministic(&summary(&again));
+    assert_eq!(differing_fields(&first, &by_hand), Vec::<String>::new());
+
+    // A baseline that claims a far better RMSE than this run's fails the check, naming it.
+    let mut baseline = r.clone();
+    let rmse = &mut baseline["aggregate"]["localization_rmse_m"];
+    let mean = rmse["mean"].as_f64().expect("an RMSE");
+    rmse["ci95"] = serde_json::json!([mean * 0.1, mean * 0.5]);
+    let baseline_path = dir.0.join("baseline.json");
+    std::fs::write(&baseline_path, baseline.to_string()).unwrap();
+    let checked = eval_command(
+        &dir.0.join("checked"),
+        &["--check", baseline_path.to_str().unwrap()],
+    )
+    .output()
+    .expect("run mole eval --check");
+    let text = output_text(&checked);
+    assert_eq!(checked.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("worse than the baseline: localization_rmse_m"),
+        "{text}"
+    );
+    assert!(!text.contains("worse than the baseline: success"), "{text}");
+    // Against its own report, the same suite passes.
+    let same = eval_command(&dir.0.join("same"), &["--check", json.to_str().unwrap()])
+        .output()
+        .expect("run mole eval --check");
+    assert!(same.status.success(), "{}", output_text(&same));
+    assert_eq!(left_behind(&before), Vec::<String>::new());
+}
+
+/// An unknown family, no worlds, a bad swap, a baseline that is not a report or frontier in
+/// the dark: exit 2, one line naming what was wrong, and no world written.
+#[test]
+fn bad_eval_input_is_refused_before_any_world_runs() {
+    let dir = TempDir::new("eval-bad");
+    let garbage = dir.0.join("garbage.json");
+    std::fs::write(&garbage, "not json").unwrap();
+    for (args, expected) in [
+        (
+            vec!["eval", "--family", "mazes"],
+            "unknown world `mazes`: expected a family",
+        ),
+        (
+            vec!["eval", "--family", "maze", "--worlds", "0"],
+            "--worlds: expected at least 1",
+        ),
+        (
+            vec!["eval", "--family", "maze", "--swap", "planning"],
+            "planning",
+        ),
+        (
+            vec![
+                "eval",
+                "--family",
+                "maze",
+                "--check",
+                garbage.to_str().unwrap(),
+            ],
+            "not a mole eval report",
+        ),
+    ] {
+        let out = dir.0.join("out");
+        let mut full = args.clone();
+        full.extend(["--out", out.to_str().unwrap()]);
+        let output = run_mole(&full);
+        let text = output_text(&output);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {text}");
+        assert!(text.contains(expected), "{args:?}: {text}");
+        assert!(
+            !out.join("worlds").exists(),
+            "{args:?}: worlds were generated"
+        );
+    }
+}
