@@ -53,6 +53,10 @@ pub struct EvalArgs {
     /// Frontier's local planner, as `mole up --local-planner`.
     #[arg(long, value_name = "dwa|apf")]
     pub local_planner: Option<PlannerKind>,
+    /// What the runs are judged on (default: navigate for a planner that drives to a goal, apf
+    /// and dwa; explore otherwise). Say it for a planner of your own swapped in with --swap.
+    #[arg(long, value_enum)]
+    pub task: Option<Task>,
     /// Replace a role's process in every run, as `mole up --swap`.
     #[arg(long = "swap", value_name = "ROLE=COMMAND")]
     pub swaps: Vec<String>,
@@ -72,6 +76,27 @@ pub struct EvalArgs {
     /// is worse than the baseline's 95% interval.
     #[arg(long, value_name = "BASELINE")]
     pub check: Option<PathBuf>,
+}
+
+/// What a suite's runs are judged on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Task {
+    /// Reach the world's goal: success, time, path length, BARN's score.
+    Navigate,
+    /// Explore the world: coverage, ending by itself, steps to 90/95/99%.
+    Explore,
+}
+
+impl Task {
+    /// The task asked for, or the one the planner does (the launch file's planner, random
+    /// walk, explores).
+    pub fn of(task: Option<Task>, planner: Option<PlannerKind>) -> Task {
+        match (task, planner) {
+            (Some(task), _) => task,
+            (None, Some(p)) if p.needs_goal() => Task::Navigate,
+            (None, _) => Task::Explore,
+        }
+    }
 }
 
 /// What `--json` writes and `--check` reads.
@@ -112,7 +137,7 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
         .max(1);
-    let navigation = args.planner.is_some_and(PlannerKind::needs_goal);
+    let navigation = Task::of(args.task, args.planner) == Task::Navigate;
     let mut scenarios = Vec::new();
     for seed in args.first_seed..args.first_seed + args.worlds {
         let scenario = generate(&spec, seed).map_err(|e| Failure::run(e.to_string()))?;
@@ -336,5 +361,27 @@ fn print_report(report: &EvalReport) {
             "{name:<26} {:>4} {:>10.4} [{:>10.4}, {:>10.4}] {:>10.4}",
             a.n, a.mean, a.ci95[0], a.ci95[1], a.median
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The goal seekers navigate, the rest explore, and `--task` overrides either (a swapped-in
+    /// planner is not known by its kind).
+    #[test]
+    fn the_task_follows_the_planner_unless_given() {
+        assert_eq!(Task::of(None, Some(PlannerKind::Dwa)), Task::Navigate);
+        assert_eq!(Task::of(None, Some(PlannerKind::Apf)), Task::Navigate);
+        assert_eq!(Task::of(None, Some(PlannerKind::Frontier)), Task::Explore);
+        assert_eq!(Task::of(None, None), Task::Explore);
+        let given = Some(Task::Navigate);
+        assert_eq!(
+            Task::of(given, Some(PlannerKind::RandomWalk)),
+            Task::Navigate
+        );
+        let given = Some(Task::Explore);
+        assert_eq!(Task::of(given, Some(PlannerKind::Dwa)), Task::Explore);
     }
 }
