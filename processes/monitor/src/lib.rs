@@ -303,7 +303,6 @@ impl Monitor {
     pub fn on_truth(&mut self, truth: &Truth) {
         let tick = truth.header.tick;
         self.true_track.push(truth.x, truth.y);
-        self.progress.on_position(tick, truth.x, truth.y);
         match self.last_truth {
             Some((last, x, y)) if tick > last => {
                 self.path_length += (truth.x - x).hypot(truth.y - y);
@@ -416,7 +415,14 @@ impl Monitor {
     fn record_milestones(&mut self) {
         self.coverage_steps = self.milestones();
         let explored = self.grid_score().explored_reachable;
-        self.progress.on_explored(self.grid_tick, explored);
+        let tick = self.grid_tick;
+        let truth = self.truths[(tick % TRUTH_RING as u64) as usize];
+        let position = match self.last_truth {
+            _ if truth.valid && truth.tick == tick => (truth.x, truth.y),
+            Some((_, x, y)) => (x, y),
+            None => self.scene.start,
+        };
+        self.progress.on_check(tick, explored, position);
     }
 
     /// The recorded milestones, and those the current grid reaches.
@@ -608,7 +614,7 @@ impl Monitor {
         } else {
             None
         };
-        self.progress.on_target(target);
+        self.progress.on_status(s.header.tick, target);
         self.plan_path.clear();
         self.plan_path.extend_from_slice(s.path());
     }
@@ -715,6 +721,7 @@ impl Monitor {
     pub fn summary(&self, meta: &RunMeta) -> Summary {
         let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
         let hash = |g: &LatestGrid| g.received.then(|| format!("{:016x}", fnv1a64(&g.cells)));
+        let progress = self.progress.finished();
         Summary {
             ticks: self.last_tick,
             sim_time_s: finite(self.last_tick as f64 * self.scene.dt),
@@ -747,10 +754,8 @@ impl Monitor {
             },
             bounces: self.bounces,
             stalls: self.stalls,
-            longest_without_progress_s: finite(
-                self.progress.longest_ticks() as f64 * self.scene.dt,
-            ),
-            livelocks: self.progress.livelocks(),
+            longest_without_progress_s: finite(progress.longest_ticks() as f64 * self.scene.dt),
+            livelocks: progress.livelocks(),
             grid_hash: hash(&self.grid),
             contact_hash: hash(&self.contact),
             reachable_free_cells: self.raster.reachable_free,

@@ -11,8 +11,22 @@ pub const APPROACH_M: f64 = 0.25;
 /// switch itself is not progress (a planner that switches for ever makes none).
 pub const NEW_TARGET_M: f64 = 0.5;
 
-/// Progress over a run, fed every truth, every target the planner reports and the explored
-/// area at the coverage checks.
+/// Planner statuses kept by tick, so each check is judged against the target of its own step.
+const TARGET_RING: usize = 64;
+/// Checks waiting for the status of their step (it may arrive after the grid of that step).
+const PENDING: usize = 16;
+
+/// One coverage check: the step, the explored cells, the robot's true position.
+#[derive(Debug, Clone, Copy, Default)]
+struct Check {
+    tick: u64,
+    explored: u64,
+    position: (f64, f64),
+}
+
+/// Progress over a run, judged at the coverage checks: each check (explored cells and the true
+/// position of its step) against the planner's target of that same step, whichever of the grid
+/// and the status came first, so the result does not depend on the order messages arrive in.
 #[derive(Debug, Clone)]
 pub struct Progress {
     window_ticks: u64,
@@ -25,6 +39,12 @@ pub struct Progress {
     longest: u64,
     livelocks: u32,
     in_livelock: bool,
+    /// The planner's target of each recent step: `(tick, target)` at `tick % TARGET_RING`.
+    targets: [(u64, Option<(f64, f64)>); TARGET_RING],
+    /// The newest step a status arrived for.
+    status_tick: Option<u64>,
+    pending: [Check; PENDING],
+    n_pending: usize,
 }
 
 impl Progress {
@@ -40,11 +60,77 @@ impl Progress {
             longest: 0,
             livelocks: 0,
             in_livelock: false,
+            targets: [(u64::MAX, None); TARGET_RING],
+            status_tick: None,
+            pending: [Check::default(); PENDING],
+            n_pending: 0,
         }
     }
 
-    /// The planner's target now (`None`: it has none).
-    pub fn on_target(&mut self, target: Option<(f64, f64)>) {
+    /// The planner's target at step `tick` (`None`: it has none); judges the checks that
+    /// waited for it.
+    pub fn on_status(&mut self, tick: u64, target: Option<(f64, f64)>) {
+        self.targets[(tick % TARGET_RING as u64) as usize] = (tick, target);
+        self.status_tick = Some(self.status_tick.map_or(tick, |t| t.max(tick)));
+        let mut kept = 0;
+        for i in 0..self.n_pending {
+            let check = self.pending[i];
+            if check.tick <= tick {
+                self.judge(check);
+            } else {
+                self.pending[kept] = check;
+                kept += 1;
+            }
+        }
+        self.n_pending = kept;
+    }
+
+    /// A coverage check at step `tick`: the explored cells and the robot's true position then.
+    pub fn on_check(&mut self, tick: u64, explored: u64, position: (f64, f64)) {
+        let check = Check {
+            tick,
+            explored,
+            position,
+        };
+        if self.status_tick.is_some_and(|t| t >= tick) {
+            self.judge(check);
+        } else if self.n_pending < PENDING {
+            self.pending[self.n_pending] = check;
+            self.n_pending += 1;
+        } else {
+            // The planner is far behind (or silent): judge the oldest against what is known.
+            let oldest = self.pending[0];
+            self.pending.copy_within(1..PENDING, 0);
+            self.pending[PENDING - 1] = check;
+            self.judge(oldest);
+        }
+    }
+
+    /// The detector at the end of the run: the checks still waiting judged against the newest
+    /// target known.
+    pub fn finished(&self) -> Progress {
+        let mut done = self.clone();
+        for i in 0..done.n_pending {
+            let check = done.pending[i];
+            done.judge(check);
+        }
+        done.n_pending = 0;
+        done
+    }
+
+    /// The target in effect at `tick`: that step's, else the newest earlier one kept.
+    fn target_at(&self, tick: u64) -> Option<(f64, f64)> {
+        (0..TARGET_RING as u64)
+            .filter_map(|back| tick.checked_sub(back))
+            .find_map(|t| {
+                let (at, target) = self.targets[(t % TARGET_RING as u64) as usize];
+                (at == t).then_some(target)
+            })
+            .flatten()
+    }
+
+    fn judge(&mut self, check: Check) {
+        let target = self.target_at(check.tick);
         self.target = match (target, self.target) {
             (None, _) => None,
             (Some(t), Some((old, best))) if (t.0 - old.0).hypot(t.1 - old.1) < NEW_TARGET_M => {
@@ -52,44 +138,31 @@ impl Progress {
             }
             (Some(t), _) => Some((t, f64::INFINITY)),
         };
-    }
-
-    /// The robot's true position at `tick`.
-    pub fn on_position(&mut self, tick: u64, x: f64, y: f64) {
         if let Some(((tx, ty), best)) = self.target.as_mut() {
-            let d = (x - *tx).hypot(y - *ty);
+            let d = (check.position.0 - *tx).hypot(check.position.1 - *ty);
             if !best.is_finite() {
                 *best = d;
             } else if d < *best - APPROACH_M {
                 *best = d;
-                self.progress(tick);
+                self.progress(check.tick);
             }
         }
-        self.advance(tick);
-    }
-
-    /// Cells explored at `tick` (the frontier grid's explored reachable cells).
-    pub fn on_explored(&mut self, tick: u64, cells: u64) {
-        if cells > self.explored {
-            self.explored = cells;
-            self.progress(tick);
+        if check.explored > self.explored {
+            self.explored = check.explored;
+            self.progress(check.tick);
         }
-        self.advance(tick);
-    }
-
-    fn progress(&mut self, tick: u64) {
-        self.last_progress = self.last_progress.max(tick);
-        self.in_livelock = false;
-    }
-
-    fn advance(&mut self, tick: u64) {
-        self.last_tick = self.last_tick.max(tick);
+        self.last_tick = self.last_tick.max(check.tick);
         let stretch = self.last_tick.saturating_sub(self.last_progress);
         self.longest = self.longest.max(stretch);
         if stretch >= self.window_ticks && !self.in_livelock {
             self.in_livelock = true;
             self.livelocks += 1;
         }
+    }
+
+    fn progress(&mut self, tick: u64) {
+        self.last_progress = self.last_progress.max(tick);
+        self.in_livelock = false;
     }
 
     /// The longest stretch without progress, in steps.
@@ -107,26 +180,38 @@ impl Progress {
 mod tests {
     use super::*;
 
+    /// A check every 10 steps at `position(tick)`, the status of each step with `target(tick)`.
+    fn run(
+        p: &mut Progress,
+        ticks: std::ops::Range<u64>,
+        target: impl Fn(u64) -> Option<(f64, f64)>,
+        position: impl Fn(u64) -> (f64, f64),
+        explored: impl Fn(u64) -> u64,
+    ) {
+        for tick in ticks {
+            p.on_status(tick, target(tick));
+            if tick % 10 == 0 {
+                p.on_check(tick, explored(tick), position(tick));
+            }
+        }
+    }
+
     /// Circling in front of a target it never reaches is a livelock, counted once however long
     /// it lasts; approaching the target or new area ends it.
     #[test]
     fn circling_before_a_target_is_a_livelock_and_progress_ends_it() {
         let mut p = Progress::new(0.1); // 300 steps make 30 s
-        p.on_target(Some((5.0, 0.0)));
-        for tick in 0..1000 {
+        let goal = |_| Some((5.0, 0.0));
+        let circle = |tick: u64| {
             let a = tick as f64 * 0.1;
-            p.on_position(tick, 1.0 + 0.3 * a.cos(), 0.3 * a.sin());
-        }
+            (1.0 + 0.3 * a.cos(), 0.3 * a.sin())
+        };
+        run(&mut p, 0..1000, goal, circle, |_| 0);
         assert_eq!(p.livelocks(), 1);
-        assert!(p.longest_ticks() >= 990, "{}", p.longest_ticks());
-        // It drives to the target: progress, then new area, and no new livelock.
-        for (i, tick) in (1000..1040).enumerate() {
-            p.on_position(tick, 1.0 + 0.1 * i as f64, 0.0);
-        }
-        p.on_explored(1040, 10);
-        for tick in 1040..1200 {
-            p.on_position(tick, 5.0, 0.0);
-        }
+        assert!(p.longest_ticks() >= 980, "{}", p.longest_ticks());
+        // It drives to the target, and finds new area there: no new livelock.
+        let drive = |tick: u64| (1.0 + 0.01 * (tick - 1000) as f64, 0.0);
+        run(&mut p, 1000..1400, goal, drive, |tick| tick / 100);
         assert_eq!(p.livelocks(), 1);
     }
 
@@ -134,30 +219,57 @@ mod tests {
     #[test]
     fn switching_targets_for_ever_is_no_progress() {
         let mut p = Progress::new(0.1);
-        for tick in 0..400 {
-            let t = if tick % 20 < 10 {
+        let flip = |tick: u64| {
+            Some(if tick % 20 < 10 {
                 (5.0, 0.0)
             } else {
                 (-5.0, 0.0)
-            };
-            p.on_target(Some(t));
-            p.on_position(tick, 0.0, 0.0);
-        }
+            })
+        };
+        run(&mut p, 0..400, flip, |_| (0.0, 0.0), |_| 0);
         assert_eq!(p.livelocks(), 1);
-        assert_eq!(p.longest_ticks(), 399);
+        assert_eq!(p.longest_ticks(), 390);
     }
 
-    /// New area every few steps keeps a run out of livelock, with no target at all.
+    /// New area at every check keeps a run out of livelock, with no target at all.
     #[test]
     fn new_area_is_progress_without_a_target() {
         let mut p = Progress::new(0.1);
-        for tick in 0..2000 {
-            p.on_position(tick, 0.0, 0.0);
-            if tick % 10 == 0 {
-                p.on_explored(tick, tick / 10);
-            }
-        }
+        run(&mut p, 0..2000, |_| None, |_| (0.0, 0.0), |tick| tick / 10);
         assert_eq!(p.livelocks(), 0);
         assert!(p.longest_ticks() <= 10);
+    }
+
+    /// A check judged before its step's status arrived, or after, gives the same result: each
+    /// check waits for the target of its own step. (Here the target switches at a check's step
+    /// from one behind the robot to one ahead, so a check judged against the step before's
+    /// target would start measuring the approach one check later.)
+    #[test]
+    fn the_order_of_grid_and_status_does_not_matter() {
+        let target = |tick: u64| {
+            Some(if tick < 500 {
+                (-10.0, 0.0)
+            } else {
+                (10.0, 0.0)
+            })
+        };
+        let position = |tick: u64| (0.004 * tick as f64, 0.0);
+        let mut status_first = Progress::new(0.01);
+        run(&mut status_first, 0..3000, target, position, |_| 0);
+        let mut check_first = Progress::new(0.01);
+        for tick in 0..3000 {
+            if tick % 10 == 0 {
+                check_first.on_check(tick, 0, position(tick));
+            }
+            // The status of each step three steps late.
+            if let Some(late) = tick.checked_sub(3) {
+                check_first.on_status(late, target(late));
+            }
+        }
+        let (a, b) = (status_first.finished(), check_first.finished());
+        assert_eq!(a.longest_ticks(), b.longest_ticks());
+        // The approach is measured from step 500 on: 0.25 m closer at the check of step 570,
+        // so the longest stretch without progress ended at the check before, 560.
+        assert_eq!(a.longest_ticks(), 560);
     }
 }
