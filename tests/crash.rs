@@ -237,9 +237,15 @@ fn a_bad_resume_file_is_refused_never_retried_and_removed() {
 #[test]
 fn a_kill_after_the_world_restarted_resumes_as_well() {
     let _serial = serial();
-    let killed = run(&[Role::World, Role::Mapping]).summary;
+    let Run {
+        summary: killed,
+        victim_log,
+    } = run(&[Role::World, Role::Mapping]);
     let differ = differing_fields(&comparable(&killed), &comparable(unkilled()));
-    assert!(differ.is_empty(), "{differ:?} differ from the unkilled run");
+    assert!(
+        differ.is_empty(),
+        "{differ:?} differ from the unkilled run; mapping's log:\n{victim_log}"
+    );
     for role in [Role::World, Role::Mapping] {
         assert_eq!(killed.restarts.get(role.name()), Some(&1), "{killed:#?}");
     }
