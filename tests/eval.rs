@@ -163,3 +163,58 @@ fn bad_eval_input_is_refused_before_any_world_runs() {
         );
     }
 }
+
+/// Ctrl-C (SIGINT to the terminal's process group: the suite and its runs) ends the suite with
+/// exit 1, saying how many worlds ran to their end; a run it cut short is left out of the report,
+/// not counted as a finished world, and nothing is left behind.
+#[test]
+fn ctrl_c_ends_the_suite_and_leaves_out_the_runs_it_cut_short() {
+    use nix::sys::signal::{Signal, killpg};
+    use nix::unistd::Pid;
+    use std::os::unix::process::CommandExt;
+    use std::time::{Duration, Instant};
+    let _serial = serial();
+    let before = shm_files();
+    let dir = TempDir::new("eval-int");
+    let json = dir.0.join("report.json");
+    let mut command = Command::new(bin_dir().join("mole"));
+    command
+        .current_dir(workspace())
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .args([
+            "eval",
+            "--family",
+            "maze",
+            "--worlds",
+            "4",
+            "--planner",
+            "frontier",
+        ])
+        .args(["--jobs", "2", "--out"])
+        .arg(dir.0.join("suite"))
+        .arg("--json")
+        .arg(&json)
+        .process_group(0)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    let child = command.spawn().expect("start mole eval");
+    let group = Pid::from_raw(child.id() as i32);
+    // Two maze runs under way (each takes tens of seconds): their logs exist.
+    let runs = dir.0.join("suite").join("runs");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while std::fs::read_dir(&runs).map_or(0, |d| d.count()) < 2 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    std::thread::sleep(Duration::from_secs(2));
+    killpg(group, Signal::SIGINT).expect("SIGINT to the suite's group");
+    let output = child.wait_with_output().expect("mole eval ends");
+    let text = output_text(&output);
+    assert_eq!(output.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("interrupted: 0 of 4 worlds ran to their end"),
+        "{text}"
+    );
+    assert_eq!(report(&json)["worlds"].as_array().map(Vec::len), Some(0));
+    assert_eq!(left_behind(&before), Vec::<String>::new());
+}

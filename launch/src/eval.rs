@@ -9,7 +9,7 @@
 pub mod metrics;
 
 use crate::parse_swap;
-use crate::up::{Failure, build_process_binaries, choices};
+use crate::up::{Failure, RunEnd, build_process_binaries, choices};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use metrics::{Aggregate, WorldInfo, WorldMetrics, aggregate, regressions};
@@ -161,7 +161,7 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
     }
     build_process_binaries(false)?;
     let started = std::time::Instant::now();
-    let results = run_all(args, &suite, jobs);
+    let (results, interrupted) = run_all(args, &suite, jobs);
     let report = EvalReport {
         family: spec.label(),
         parameters: spec.describe(),
@@ -181,6 +181,13 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
     }
     let failed = report.worlds.iter().filter(|w| w.exit_code != 0).count();
     let mut problems = Vec::new();
+    if interrupted {
+        problems.push(format!(
+            "interrupted: {} of {} worlds ran to their end; the report holds only those",
+            report.worlds.len(),
+            suite.len()
+        ));
+    }
     if failed > 0 {
         problems.push(format!(
             "{failed} of {} runs failed (their logs are in {})",
@@ -228,9 +235,9 @@ fn job(scenario: &Scenario, path: PathBuf, seed: u64, navigation: bool, ticks: O
     }
 }
 
-/// Runs every job, `jobs` at a time, with a progress bar; Ctrl-C lets the running ones finish
-/// and starts no more.
-fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> Vec<WorldMetrics> {
+/// Runs every job, `jobs` at a time, with a progress bar. Ctrl-C starts no more and leaves out
+/// the runs it cut short; the second value says whether that happened.
+fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> (Vec<WorldMetrics>, bool) {
     let bar = ProgressBar::new(suite.len() as u64).with_style(
         ProgressStyle::with_template(
             "{bar:40} {pos}/{len} worlds {elapsed_precise} eta {eta} {msg}",
@@ -254,7 +261,9 @@ fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> Vec<WorldMetrics> {
                     if i >= suite.len() || interrupted.load(Ordering::SeqCst) {
                         break;
                     }
-                    let metrics = run_one(args, &suite[i], i);
+                    let Some(metrics) = run_one(args, &suite[i], i) else {
+                        break;
+                    };
                     if metrics.exit_code != 0 {
                         bar.println(format!(
                             "{}: mole up exited with {}",
@@ -268,16 +277,16 @@ fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> Vec<WorldMetrics> {
         }
     });
     bar.finish_and_clear();
-    results
-        .into_inner()
-        .expect("no job panics")
-        .into_iter()
-        .flatten()
-        .collect()
+    let results = results.into_inner().expect("no job panics");
+    (
+        results.into_iter().flatten().collect(),
+        interrupted.load(Ordering::SeqCst),
+    )
 }
 
-/// One world's run by a `mole up` of its own, in a namespace of its own.
-fn run_one(args: &EvalArgs, job: &Job, index: usize) -> WorldMetrics {
+/// One world's run by a `mole up` of its own, in a namespace of its own; `None` when Ctrl-C
+/// cut it short (its metrics would be those of a part of the run).
+fn run_one(args: &EvalArgs, job: &Job, index: usize) -> Option<WorldMetrics> {
     let out = args.out.join("runs").join(&job.info.name);
     let log_path = args.out.join("runs").join(format!("{}.log", job.info.name));
     let exe = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("mole"));
@@ -324,8 +333,11 @@ fn run_one(args: &EvalArgs, job: &Job, index: usize) -> WorldMetrics {
         }
     };
     match read_summary(&out.join("summary.json")) {
-        Ok(summary) if exit_code == 0 => WorldMetrics::of(&job.info, &summary, exit_code),
-        _ => WorldMetrics::failed(&job.info, exit_code),
+        Ok(summary) if Some(summary.exit_reason.as_str()) == RunEnd::Interrupted.exit_reason() => {
+            None
+        }
+        Ok(summary) if exit_code == 0 => Some(WorldMetrics::of(&job.info, &summary, exit_code)),
+        _ => Some(WorldMetrics::failed(&job.info, exit_code)),
     }
 }
 
