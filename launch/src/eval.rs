@@ -14,7 +14,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use metrics::{Aggregate, WorldInfo, WorldMetrics, aggregate, regressions};
 use mole_monitor::read_summary;
-use mole_types::{EstimatorKind, PlannerKind};
+use mole_types::{EstimatorKind, PlannerKind, Role};
 use mole_world::{FreeSpace, Scenario, WorldSpec, generate, world_toml};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -106,7 +106,8 @@ pub struct EvalReport {
     pub family: String,
     /// The family's parameters, `key = value`.
     pub parameters: String,
-    /// The planner and estimator every run used (`default`: the launch file's).
+    /// The planner and estimator every run used (`default`: the launch file's; `ROLE=COMMAND`:
+    /// the command swapped in for it).
     pub planner: String,
     pub estimator: String,
     pub first_seed: u64,
@@ -165,8 +166,12 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
     let report = EvalReport {
         family: spec.label(),
         parameters: spec.describe(),
-        planner: args.planner.map_or("default".into(), |p| p.to_string()),
-        estimator: args.estimator.map_or("default".into(), |e| e.to_string()),
+        planner: role_label(args, Role::Planning, args.planner.map(|p| p.to_string())),
+        estimator: role_label(
+            args,
+            Role::Localization,
+            args.estimator.map(|e| e.to_string()),
+        ),
         first_seed: args.first_seed,
         aggregate: aggregate(&results),
         worlds: results,
@@ -207,6 +212,20 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
         Ok(())
     } else {
         Err(Failure::run(problems.join("\n")))
+    }
+}
+
+/// What played a role in the runs: the command swapped in for it, else the kind chosen, else
+/// the launch file's (`default`).
+fn role_label(args: &EvalArgs, role: Role, kind: Option<String>) -> String {
+    let swapped = args
+        .swaps
+        .iter()
+        .find(|swap| parse_swap(swap).is_ok_and(|(r, _)| r == role.name()));
+    match (swapped, kind) {
+        (Some(swap), _) => swap.clone(),
+        (None, Some(kind)) => kind,
+        (None, None) => "default".to_owned(),
     }
 }
 
@@ -379,6 +398,33 @@ fn print_report(report: &EvalReport) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The report names a swapped-in command as the role's, else the kind chosen, else the
+    /// launch file's.
+    #[test]
+    fn the_report_names_what_played_each_role() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            eval: EvalArgs,
+        }
+        let parse = |args: &[&str]| {
+            let base = ["mole-eval", "--family", "maze"];
+            let all: Vec<&str> = base.iter().chain(args).copied().collect();
+            <Cli as clap::Parser>::parse_from(all).eval
+        };
+        let a = parse(&["--planner", "dwa", "--swap", "planning=python3 mine.py"]);
+        let kind = a.planner.map(|p| p.to_string());
+        assert_eq!(
+            role_label(&a, Role::Planning, kind),
+            "planning=python3 mine.py"
+        );
+        let a = parse(&["--estimator", "pf", "--swap", "planning=python3 mine.py"]);
+        let kind = a.estimator.map(|e| e.to_string());
+        assert_eq!(role_label(&a, Role::Localization, kind), "pf");
+        let a = parse(&[]);
+        assert_eq!(role_label(&a, Role::Localization, None), "default");
+    }
 
     /// The goal seekers navigate, the rest explore, and `--task` overrides either (a swapped-in
     /// planner is not known by its kind).
