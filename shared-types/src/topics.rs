@@ -102,18 +102,21 @@ pub trait TopicVisitor {
 
 // History 1 on the control loop's topics: a lockstep process restarted after a crash missed the
 // step sent while it was down; its publisher hands it that step from history while it waits
-// (`Context::offer_history`).
+// (`Context::offer_history`). History 2 on what mapping reads (pose, scan, tactile): mapping runs
+// beside the loop, so when it dies the world may already be a step past the one it owes
+// (planning needs only the grid of the step before), and a history of 1 no longer held that
+// step's pose and scan for its restart, which then skipped it (the grid hash differed).
 topics! {
     /// The arena, robot and sensor settings, once (history 1 for processes that join late).
     WORLD_MAP: WorldMap = Topic::new("world/map").history(1).buffer(2);
     /// The true state after each step.
     WORLD_TRUTH: Truth = Topic::new("world/truth").history(1).buffer(64);
-    SENSING_SCAN: Scan = Topic::new("sensing/scan").history(1);
-    SENSING_TACTILE: Tactile = Topic::new("sensing/tactile").history(1);
+    SENSING_SCAN: Scan = Topic::new("sensing/scan").history(2);
+    SENSING_TACTILE: Tactile = Topic::new("sensing/tactile").history(2);
     SENSING_ODOM: Odom = Topic::new("sensing/odom").history(1);
     SENSING_BEACONS: Beacons = Topic::new("sensing/beacons").history(1);
     SENSING_FIX: Fix = Topic::new("sensing/fix").history(1);
-    LOCALIZATION_POSE: Pose = Topic::new("localization/pose").history(1).buffer(64);
+    LOCALIZATION_POSE: Pose = Topic::new("localization/pose").history(2).buffer(64);
     LOCALIZATION_PARTICLES: Particles = Topic::new("localization/particles").buffer(2);
     /// The SLAM estimators' beacon map.
     LOCALIZATION_LANDMARKS: Landmarks = Topic::new("localization/landmarks").buffer(4);
