@@ -846,11 +846,11 @@ WORLD_TRUTH = Topic(
 )
 
 SENSING_SCAN = Topic(
-    "sensing/scan", Scan, history=1, buffer=16, max_publishers=2, max_subscribers=16
+    "sensing/scan", Scan, history=2, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 SENSING_TACTILE = Topic(
-    "sensing/tactile", Tactile, history=1, buffer=16, max_publishers=2, max_subscribers=16
+    "sensing/tactile", Tactile, history=2, buffer=16, max_publishers=2, max_subscribers=16
 )
 
 SENSING_ODOM = Topic(
@@ -866,7 +866,7 @@ SENSING_FIX = Topic(
 )
 
 LOCALIZATION_POSE = Topic(
-    "localization/pose", Pose, history=1, buffer=64, max_publishers=2, max_subscribers=16
+    "localization/pose", Pose, history=2, buffer=64, max_publishers=2, max_subscribers=16
 )
 
 LOCALIZATION_PARTICLES = Topic(
