@@ -153,7 +153,7 @@ fn nearest_beacon(beacons: &[BeaconSite], x: f64, y: f64) -> Option<usize> {
 
 /// eᵀΣ⁻¹e for a 2-D error and a row-major 2×2 Σ (its symmetric part); `None` unless Σ is
 /// positive definite.
-pub(crate) fn nees_2d(e: &[f64; 2], cov: &[f64; 4]) -> Option<f64> {
+pub fn nees_2d(e: &[f64; 2], cov: &[f64; 4]) -> Option<f64> {
     let (a, b, d) = (cov[0], 0.5 * (cov[1] + cov[2]), cov[3]);
     let det = a * d - b * b;
     if !(a > 0.0 && det > 0.0) {

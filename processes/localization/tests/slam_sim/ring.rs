@@ -13,7 +13,6 @@ use mole_sensing::Sensing;
 use mole_types::{Beacons, Landmarks, Odom, Truth, WorldMap};
 use mole_world::{Scenario, load_scenario};
 use nalgebra::Vector3;
-use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// The scenario file the world below is read from.
 pub const SCENARIO: &str = concat!(
@@ -118,18 +117,6 @@ impl MapScore {
     }
 }
 
-/// eᵀΣ⁻¹e for a row-major 2×2 Σ (its symmetric part); `None` unless Σ is positive definite
-/// (the monitor's `nees_2d`).
-fn nees_2d(e: [f64; 2], cov: &[f64; 4]) -> Option<f64> {
-    let (a, b, d) = (cov[0], 0.5 * (cov[1] + cov[2]), cov[3]);
-    let det = a * d - b * b;
-    if !(a > 0.0 && det > 0.0) {
-        return None;
-    }
-    let v = (d * e[0] * e[0] - 2.0 * b * e[0] * e[1] + a * e[1] * e[1]) / det;
-    v.is_finite().then_some(v)
-}
-
 /// Scores `map` against `beacons` (indexed by id).
 pub fn score_map(map: &Landmarks, beacons: &[(f64, f64)]) -> MapScore {
     let (mut squared, mut nees, mut samples) = (0.0, 0.0, 0);
@@ -138,7 +125,7 @@ pub fn score_map(map: &Landmarks, beacons: &[(f64, f64)]) -> MapScore {
         let (x, y) = beacons[l.id as usize];
         let e = [l.x - x, l.y - y];
         squared += e[0] * e[0] + e[1] * e[1];
-        if let Some(v) = nees_2d(e, &l.covariance) {
+        if let Some(v) = mole_monitor::nees_2d(&e, &l.covariance) {
             nees += v;
             samples += 1;
         }
@@ -161,7 +148,7 @@ pub fn score_map(map: &Landmarks, beacons: &[(f64, f64)]) -> MapScore {
 /// formula bounds the mean over n runs of each run's mean NEES, whose variance is at most that
 /// of one χ²₂ however its landmarks' errors are correlated (docs/algorithms.md §6.9.5).
 pub fn mean_nees_interval(n: usize) -> (f64, f64) {
-    let chi2 = ChiSquared::new(2.0 * n.max(1) as f64).expect("positive degrees of freedom");
-    let n = n.max(1) as f64;
-    (chi2.inverse_cdf(0.025) / n, chi2.inverse_cdf(0.975) / n)
+    let n = u32::try_from(n.max(1)).expect("a count of landmarks or runs");
+    let [lo, hi] = mole_monitor::mean_nees_interval(2, n).expect("an interval for n ≥ 1");
+    (lo, hi)
 }

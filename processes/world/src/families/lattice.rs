@@ -4,7 +4,7 @@
 //! draws its maze; the arena walls bound the outer cells.
 
 use super::{ChaCha8Rng, index};
-use mole_types::Square;
+use mole_types::{Pose2, Square};
 use std::collections::VecDeque;
 
 /// The wall between two neighbouring cells.
@@ -234,6 +234,19 @@ impl Lattice {
             }
         }
         out
+    }
+
+    /// The layout it draws: the start in cell (0, 0), the goal in the cell farthest from it.
+    pub(super) fn layout(&self) -> super::Layout {
+        let (width, height) = self.extent();
+        let (sx, sy) = self.centre((0, 0));
+        super::Layout {
+            width,
+            height,
+            start: Pose2::new(sx, sy, 0.0),
+            goal: self.centre(self.farthest((0, 0))),
+            obstacles: self.squares(),
+        }
     }
 
     /// The squares of the lattice: each solid cell one square of side `c + 2w` (the cell and

@@ -6,7 +6,7 @@ use super::lattice::{self, Lattice, Wall};
 use super::{
     Bad, ChaCha8Rng, Layout, at_least, check_arena, check_obstacles, positive, wider_than_robot,
 };
-use mole_types::{Pose2, RobotSpec};
+use mole_types::RobotSpec;
 
 /// Parameters of the maze family.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,17 +77,7 @@ impl MazeParams {
 
     /// One draw: the maze, the start in cell (0, 0), the goal in the farthest cell.
     pub(super) fn draw(&self, rng: &mut ChaCha8Rng) -> Layout {
-        let lattice = self.lattice(rng);
-        let (width, height) = lattice.extent();
-        let (sx, sy) = lattice.centre((0, 0));
-        let goal = lattice.centre(lattice.farthest((0, 0)));
-        Layout {
-            width,
-            height,
-            start: Pose2::new(sx, sy, 0.0),
-            goal,
-            obstacles: lattice.squares(),
-        }
+        self.lattice(rng).layout()
     }
 }
 

@@ -8,7 +8,7 @@ use super::{
     Bad, ChaCha8Rng, Layout, at_least, check_arena, check_obstacles, index, positive, uniform,
     wider_than_robot,
 };
-use mole_types::{Pose2, RobotSpec};
+use mole_types::RobotSpec;
 
 /// Parameters of the rooms family.
 #[derive(Debug, Clone, PartialEq)]
@@ -136,17 +136,7 @@ impl RoomsParams {
 
     /// One draw: the floor, the start in room (0, 0), the goal in the farthest room.
     pub(super) fn draw(&self, rng: &mut ChaCha8Rng) -> Layout {
-        let lattice = self.lattice(rng);
-        let (width, height) = lattice.extent();
-        let (sx, sy) = lattice.centre((0, 0));
-        let goal = lattice.centre(lattice.farthest((0, 0)));
-        Layout {
-            width,
-            height,
-            start: Pose2::new(sx, sy, 0.0),
-            goal,
-            obstacles: lattice.squares(),
-        }
+        self.lattice(rng).layout()
     }
 }
 
