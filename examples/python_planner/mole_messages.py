@@ -513,7 +513,7 @@ _check(Cmd, 56, 8, [0, 32, 40, 48, 52])
 
 
 class PlanStatus(ctypes.Structure):
-    """`mole.PlanStatus.v1`: 4176 bytes, alignment 8."""
+    """`mole.PlanStatus.v2`: 4184 bytes, alignment 8."""
 
     _fields_ = [
         ("header", Header),
@@ -524,16 +524,18 @@ class PlanStatus(ctypes.Structure):
         ("frontier_x", ctypes.c_double),
         ("frontier_y", ctypes.c_double),
         ("bounces", ctypes.c_uint32),
+        ("give_ups", ctypes.c_uint32),
         ("n_path", ctypes.c_uint32),
+        ("_pad", ctypes.c_uint32),
         ("path", (ctypes.c_float * 2) * 512),
     ]
 
     @classmethod
     def type_name(cls) -> str:
-        return "mole.PlanStatus.v1"
+        return "mole.PlanStatus.v2"
 
 
-_check(PlanStatus, 4176, 8, [0, 32, 36, 40, 48, 56, 64, 72, 76, 80])
+_check(PlanStatus, 4184, 8, [0, 32, 36, 40, 48, 56, 64, 72, 76, 80, 84, 88])
 
 
 class Tick(ctypes.Structure):

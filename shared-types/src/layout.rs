@@ -97,7 +97,8 @@ pub fn all() -> Vec<TypeLayout> {
             header, width, height, resolution, origin_x, origin_y, kind, _pad, cells),
         layout!(Cmd, type_name::<Cmd>(); header, v, omega, mode, _pad),
         layout!(PlanStatus, type_name::<PlanStatus>();
-            header, mode, flags, goal_x, goal_y, frontier_x, frontier_y, bounces, n_path, path),
+            header, mode, flags, goal_x, goal_y, frontier_x, frontier_y, bounces, give_ups, n_path, _pad,
+            path),
         layout!(Tick, type_name::<Tick>(); header, dt, flags, mode),
         layout!(Stats, type_name::<Stats>();
             header, process, pid, n_topics, cpu_ns, max_rss_bytes, steps, topics),
@@ -498,7 +499,7 @@ const _: () = {
     assert!(size_of::<Trajectory>() == 48 + 16 * MAX_TRAJECTORY_POSES);
     assert!(size_of::<Grid>() == 72 + MAX_GRID_CELLS);
     assert!(size_of::<Cmd>() == 56);
-    assert!(size_of::<PlanStatus>() == 80 + 8 * MAX_PATH);
+    assert!(size_of::<PlanStatus>() == 88 + 8 * MAX_PATH);
     assert!(size_of::<Tick>() == 48);
     assert!(size_of::<TopicStats>() == 80);
     assert!(size_of::<Stats>() == 96 + 80 * MAX_TOPIC_STATS);

@@ -851,7 +851,7 @@ const STATUS_FLAGS: u32 = STATUS_HAS_GOAL | STATUS_HAS_FRONTIER | STATUS_EXPLORA
 /// `planning/status`: what the planner is doing and why.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("mole.PlanStatus.v1")]
+#[type_name("mole.PlanStatus.v2")]
 pub struct PlanStatus {
     pub header: Header,
     pub mode: u32,
@@ -862,7 +862,10 @@ pub struct PlanStatus {
     pub frontier_y: f64,
     /// Bounce-backs triggered so far.
     pub bounces: u32,
+    /// Frontier targets given up so far: not approached in time or unreachable.
+    pub give_ups: u32,
     pub n_path: u32,
+    pub _pad: u32,
     /// Waypoints (m), world frame.
     pub path: [[f32; 2]; MAX_PATH],
 }

@@ -66,6 +66,9 @@ pub struct WorldMetrics {
     pub association_errors: Option<u32>,
     pub contact_events: Option<u64>,
     pub stalls: Option<u32>,
+    /// Frontier targets the planner gave up (not approached in time or unreachable).
+    #[serde(default)]
+    pub give_ups: Option<u32>,
     /// Stretches of 30 s without progress (no new area, no approach to the target).
     pub livelocks: Option<u32>,
     /// The longest stretch without progress (s).
@@ -152,6 +155,7 @@ impl WorldMetrics {
             association_errors: slam.map(|s| s.association_errors),
             contact_events: Some(summary.contact_events),
             stalls: Some(summary.stalls),
+            give_ups: Some(summary.give_ups),
             livelocks: Some(summary.livelocks),
             longest_without_progress_s: Some(summary.longest_without_progress_s),
             restarts: Some(summary.restarts.values().sum()),
@@ -161,7 +165,7 @@ impl WorldMetrics {
     }
 
     /// Every metric as a number, by name, for the aggregates: a yes/no as 0 or 1 (a fraction).
-    fn values(&self) -> Vec<(&'static str, Option<f64>, Kind)> {
+    pub(crate) fn values(&self) -> Vec<(&'static str, Option<f64>, Kind)> {
         use Kind::{Fraction, Mean};
         let b = |v: Option<bool>| v.map(|x| if x { 1.0 } else { 0.0 });
         let u = |v: Option<u64>| v.map(|x| x as f64);
@@ -191,6 +195,7 @@ impl WorldMetrics {
             ("association_errors", w(self.association_errors), Mean),
             ("contact_events", u(self.contact_events), Mean),
             ("stalls", w(self.stalls), Mean),
+            ("give_ups", w(self.give_ups), Mean),
             ("livelocks", w(self.livelocks), Mean),
             (
                 "longest_without_progress_s",

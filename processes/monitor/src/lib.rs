@@ -201,6 +201,8 @@ pub struct Monitor {
     /// New area or an approach to the planner's target, or neither (a livelock).
     progress: Progress,
     bounces: u32,
+    /// Frontier targets the planner gave up so far (`PlanStatus::give_ups`).
+    give_ups: u32,
     exploration_complete: bool,
     plan_path: Vec<[f32; 2]>,
 }
@@ -272,6 +274,7 @@ impl Monitor {
             stalls: 0,
             progress: Progress::new(map.dt),
             bounces: 0,
+            give_ups: 0,
             exploration_complete: false,
             plan_path: Vec::with_capacity(MAX_PATH),
         })
@@ -606,6 +609,7 @@ impl Monitor {
         }
         self.plan_mode = s.mode;
         self.bounces = s.bounces;
+        self.give_ups = s.give_ups;
         self.exploration_complete |= s.flags & STATUS_EXPLORATION_COMPLETE != 0;
         let target = if s.flags & STATUS_HAS_FRONTIER != 0 {
             Some((s.frontier_x, s.frontier_y))
@@ -753,6 +757,7 @@ impl Monitor {
                 p99: quantile_us(&self.update_ns, 0.99),
             },
             bounces: self.bounces,
+            give_ups: self.give_ups,
             stalls: self.stalls,
             longest_without_progress_s: finite(progress.longest_ticks() as f64 * self.scene.dt),
             livelocks: progress.livelocks(),
@@ -767,7 +772,12 @@ impl Monitor {
             end_reason: self
                 .ended
                 .then(|| end_reason_name(self.end_reason).to_owned()),
-            exploration_complete: self.exploration_complete,
+            // The world ends the run on the planner's MODE_DONE, possibly before the monitor
+            // reads the status that carries the flag: that end is the planner's word too.
+            exploration_complete: self.exploration_complete
+                || (self.ended
+                    && EndReason::from_code(self.end_reason)
+                        == Some(EndReason::ExplorationComplete)),
             contact_events: self.contact_events,
             contact_ticks: self.contact_ticks,
             pose_samples: self.pose_samples,

@@ -86,6 +86,10 @@ pub struct Summary {
     pub mean_nees: Option<f64>,
     pub estimator_update_us: UpdateUs,
     pub bounces: u32,
+    /// Frontier targets given up so far: not approached in time or unreachable (the last
+    /// `PlanStatus::give_ups`).
+    #[serde(default)]
+    pub give_ups: u32,
     /// Times the planner reported a stall in a local minimum.
     pub stalls: u32,
     /// The longest stretch without progress (no new explored area, no approach of 0.25 m to the

@@ -396,6 +396,23 @@ fn goal_contacts_penetration_and_end() {
     assert_eq!(s.end_reason.as_deref(), Some("goal_reached"));
 }
 
+/// The world ends the run on the planner's MODE_DONE; the status with the flag may come after
+/// the final truth, or never: the run still ended by the planner's word.
+#[test]
+fn an_exploration_complete_end_counts_as_ended_by_itself_without_the_status_flag() {
+    let mut m = Monitor::new(&walled_world(0.1)).unwrap();
+    let mut t = truth(1, 0.5, 1.0, 0.0);
+    m.on_truth(&t);
+    assert!(!m.summary(&RunMeta::default()).exploration_complete);
+    t = truth(2, 0.5, 1.0, 0.0);
+    t.flags |= TRUTH_END;
+    t.end_reason = mole_types::EndReason::ExplorationComplete.code();
+    m.on_truth(&t);
+    let s = m.summary(&RunMeta::default());
+    assert!(s.exploration_complete);
+    assert_eq!(s.end_reason.as_deref(), Some("exploration_complete"));
+}
+
 // ---------------------------------------------------------------------------------------------
 // Statistics and planner status
 // ---------------------------------------------------------------------------------------------
@@ -456,19 +473,21 @@ fn topic_summary_takes_max_subscriber_rate_and_sums_drops() {
 }
 
 #[test]
-fn plan_status_bounces_and_exploration_flag() {
+fn plan_status_bounces_give_ups_and_exploration_flag() {
     let mut m = Monitor::new(&walled_world(0.1)).unwrap();
     let mut s: Box<PlanStatus> = bytemuck::zeroed_box();
     s.bounces = 3;
+    s.give_ups = 1;
     s.mode = mole_types::MODE_EXPLORE;
     s.n_path = 2;
     s.path[1] = [1.0, 1.0];
     m.on_plan_status(&s);
     s.flags = STATUS_EXPLORATION_COMPLETE;
     s.bounces = 5;
+    s.give_ups = 2;
     m.on_plan_status(&s);
     let sum = m.summary(&RunMeta::default());
-    assert_eq!(sum.bounces, 5);
+    assert_eq!((sum.bounces, sum.give_ups), (5, 2));
     assert!(sum.exploration_complete);
     assert_eq!(m.plan_points().len(), 2);
     assert_eq!(m.plan_mode(), mole_types::MODE_EXPLORE);
@@ -590,7 +609,7 @@ fn summary_json_has_every_field_with_its_type_and_round_trips() {
     let scan = &o["topics"]["sensing/scan"];
     assert!(scan["rate_hz"].is_f64() && scan["dropped"].is_u64() && scan["invalid"].is_u64());
     assert_eq!(o["restarts"]["mapping"].as_u64(), Some(1));
-    assert!(o["bounces"].is_u64());
+    assert!(o["bounces"].is_u64() && o["give_ups"].is_u64());
     // The design's fields come first, in the design's order.
     let order = [
         "ticks",
@@ -615,6 +634,7 @@ fn summary_json_has_every_field_with_its_type_and_round_trips() {
         "mean_nees",
         "estimator_update_us",
         "bounces",
+        "give_ups",
         "grid_hash",
         "contact_hash",
         "reachable_free_cells",

@@ -5,15 +5,17 @@
 //! least `min_cluster` cells. Each cluster is a candidate f, represented by its reachable cell
 //! nearest its centroid; I(f) = unexplored cells within `gain_radius` (a square window, counted
 //! with a summed-area table), L(f) from ONE Dijkstra search out of the robot's cell (octile, no
-//! corner cutting, through free cells farther than the robot radius from any occupied cell, or
-//! through all free cells when the robot's own cell is inside that inflation), and
+//! corner cutting, through free cells farther than the robot radius + margin from any occupied
+//! cell, plus those near the robot when it stands inside that inflation), and
 //! C(f) = −α·I/I_max + β·L/L_max with I_max, L_max over the current candidates (§5.3). The chosen
 //! frontier's path comes from the Dijkstra predecessors, shortened by line of sight to at most
 //! `MAX_PATH` waypoints, and a local planner (DWA or APF) follows a carrot on it. Re-selection:
 //! when the frontier is reached, vanishes, or every `reselect_every` steps. A frontier reached
-//! that is still there is exhausted (its cells count as no frontier from then on). Done when no
-//! frontier is worth going to: none of `min_cluster` cells or more that is reachable and not
-//! exhausted (algorithms §5, "complete"; `MODE_DONE`, `STATUS_EXPLORATION_COMPLETE`, zero wish).
+//! that is still there is exhausted (its cells count as no frontier from then on); a target
+//! with neither approach nor new area for `give_up_s` is given up and counted (§5.3, "give
+//! up"). Done when no frontier is worth going to: none of `min_cluster` cells or more that is
+//! reachable, not exhausted and not given up (algorithms §5, "complete"; `MODE_DONE`,
+//! `STATUS_EXPLORATION_COMPLETE`, zero wish).
 
 use crate::apf::{Apf, ApfConfig};
 use crate::distance_field::DistanceField;
@@ -49,6 +51,13 @@ pub struct FrontierConfig {
     pub inflation_margin: f64,
     /// Selections in a row without a reachable frontier before exploration is declared done.
     pub done_after: u32,
+    /// APPROACH (m): coming this much closer to the target (along its path) than ever is
+    /// progress (algorithms §5.3, "give up").
+    pub approach: f64,
+    /// A target with neither approach nor new area for this long (s) is given up (§5.3).
+    pub give_up_s: f64,
+    /// Frontier cells within this distance (m) of a target given up are no frontier any more.
+    pub give_up_radius: f64,
 }
 
 impl Default for FrontierConfig {
@@ -63,6 +72,9 @@ impl Default for FrontierConfig {
             lookahead: 0.6,
             inflation_margin: 0.12,
             done_after: 3,
+            approach: 0.25,
+            give_up_s: 12.0,
+            give_up_radius: 0.6,
         }
     }
 }
@@ -127,6 +139,8 @@ pub struct FrontierSelector {
     /// Frontier cells the robot went to and could not explore (see [`Self::exhaust`]); they
     /// are no frontier any more. Cleared when the grid's shape changes.
     exhausted: Vec<bool>,
+    /// Whether the robot stood inside the inflation at the last selection.
+    inside_inflation: Option<bool>,
 }
 
 impl FrontierSelector {
@@ -154,6 +168,7 @@ impl FrontierSelector {
             path_cells: Vec::with_capacity(n),
             path: Vec::with_capacity(MAX_PATH),
             exhausted: Vec::with_capacity(n),
+            inside_inflation: None,
         }
     }
 
@@ -170,6 +185,31 @@ impl FrontierSelector {
         for (e, &l) in self.exhausted.iter_mut().zip(&self.label) {
             *e |= l == cluster;
         }
+    }
+
+    /// Frontier cells within `radius` m of cell `cell` are no frontier from now on: a target
+    /// given up (algorithms §5.3, "give up").
+    pub fn exhaust_around(&mut self, cell: usize, radius: f64) {
+        if self.w == 0 || self.exhausted.len() != self.w * self.h || cell >= self.exhausted.len() {
+            return;
+        }
+        let (w, h) = (self.w as i64, self.h as i64);
+        let k = (radius / self.res).ceil().max(0.0) as i64;
+        let (cx, cy) = ((cell % self.w) as i64, (cell / self.w) as i64);
+        for y in (cy - k).max(0)..=(cy + k).min(h - 1) {
+            for x in (cx - k).max(0)..=(cx + k).min(w - 1) {
+                if ((x - cx) * (x - cx) + (y - cy) * (y - cy)) as f64 * self.res * self.res
+                    <= radius * radius
+                {
+                    self.exhausted[(y * w + x) as usize] = true;
+                }
+            }
+        }
+    }
+
+    /// Unexplored cells of the grid at the last selection.
+    pub fn unexplored(&self) -> u32 {
+        self.integral.last().copied().unwrap_or(0)
     }
 
     /// The candidates of the last selection.
@@ -193,6 +233,17 @@ impl FrontierSelector {
     /// cheapest reachable one (and fills its path); `None` if none is reachable or the grid is
     /// unusable. Allocation-free once the buffers have the grid's size.
     pub fn select(&mut self, grid: &Grid, robot: [f64; 2]) -> Option<Frontier> {
+        let keep = self.radius + self.config.inflation_margin;
+        let best = self.select_with(grid, robot, keep);
+        if best.is_some() || self.inside_inflation.is_none_or(|inside| !inside) {
+            return best;
+        }
+        // Wedged where the inflation leaves no way out: the robot's radius alone (§5.3).
+        self.select_with(grid, robot, self.radius)
+    }
+
+    fn select_with(&mut self, grid: &Grid, robot: [f64; 2], keep: f64) -> Option<Frontier> {
+        self.inside_inflation = None;
         self.candidates.clear();
         self.path.clear();
         let res = grid.resolution;
@@ -217,8 +268,7 @@ impl FrontierSelector {
         }
         let source = row as usize * w + col as usize;
         self.field.update(grid);
-        // Free cells outside the inflation; without inflation if the robot sits inside it.
-        let keep = self.radius + self.config.inflation_margin;
+        // Free cells outside the inflation (and around the robot if it sits inside it).
         self.field.clear_of(keep, &mut self.passable);
         if self.passable.len() != cells.len() {
             return None;
@@ -226,9 +276,28 @@ impl FrontierSelector {
         for (p, c) in self.passable.iter_mut().zip(cells) {
             *p &= *c == CELL_FREE;
         }
+        self.inside_inflation = Some(!self.passable[source]);
         if !self.passable[source] {
-            for (p, c) in self.passable.iter_mut().zip(cells) {
-                *p = *c == CELL_FREE;
+            // The robot inside the inflation: free cells near it that its radius alone fits
+            // (and its own and the next ones no nearer the wall) let it step out (§5.3);
+            // everything else keeps the inflation the path is driven with, so a frontier behind
+            // a gap too narrow stays unreachable.
+            let k = (keep / res).ceil() as i64 + 1;
+            let (sc, sr) = (col as i64, row as i64);
+            let here = self.field.cell_clearance(source);
+            self.passable[source] = cells[source] == CELL_FREE;
+            for r in (sr - k).max(0)..=(sr + k).min(h as i64 - 1) {
+                for c in (sc - k).max(0)..=(sc + k).min(w as i64 - 1) {
+                    let i = r as usize * w + c as usize;
+                    let d2 = ((r - sr) * (r - sr) + (c - sc) * (c - sc)) as f64;
+                    let clearance = self.field.cell_clearance(i);
+                    // Its radius fits, or one cell from where it stands, no nearer the wall.
+                    let fits = clearance > self.radius
+                        || ((r - sr).abs() <= 1 && (c - sc).abs() <= 1 && clearance >= here);
+                    if d2 <= (k * k) as f64 && cells[i] == CELL_FREE && fits {
+                        self.passable[i] = true;
+                    }
+                }
             }
         }
         let passable = &self.passable;
@@ -400,7 +469,27 @@ pub struct FrontierExplorer {
     done: bool,
     carrot: Option<[f64; 2]>,
     selections: u64,
+    /// Progress toward the target (algorithms §5.3, "give up").
+    track: Track,
+    /// Targets given up so far: not approached in time (§5.3).
+    give_ups: u32,
 }
+
+/// A target's progress (algorithms §5.3, "give up"): the shortest path length left to it so
+/// far, the fewest unexplored cells seen, and the step of the last progress.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Track {
+    target: Option<[f64; 2]>,
+    best: f64,
+    unexplored: u32,
+    since: u64,
+}
+
+/// A target that moved this far (m) is a new one: its approach is measured afresh, but the
+/// switch itself is no progress (as the monitor's livelock detector judges it).
+const NEW_TARGET_M: f64 = 0.5;
+/// Fewer unexplored cells than ever by this many is new area, progress (§5.3).
+const NEW_AREA_CELLS: u32 = 10;
 
 impl FrontierExplorer {
     /// A frontier explorer with `local` following the path.
@@ -426,7 +515,66 @@ impl FrontierExplorer {
             done: false,
             carrot: None,
             selections: 0,
+            track: Track {
+                target: None,
+                best: f64::INFINITY,
+                unexplored: u32::MAX,
+                since: 0,
+            },
+            give_ups: 0,
         }
+    }
+
+    /// Frontier targets given up so far: not approached in time (algorithms §5.3).
+    pub fn give_ups(&self) -> u32 {
+        self.give_ups
+    }
+
+    /// Path length (m) left from `p` along the followed path to its end.
+    fn path_left(&self, p: [f64; 2]) -> f64 {
+        let rest = self.follow.remaining();
+        let Some(&first) = rest.get(1) else {
+            return self
+                .chosen
+                .map_or(f64::INFINITY, |f| (p[0] - f.x).hypot(p[1] - f.y));
+        };
+        let along: f64 = rest[1..]
+            .windows(2)
+            .map(|s| (s[1][0] - s[0][0]).hypot(s[1][1] - s[0][1]))
+            .sum();
+        (p[0] - first[0]).hypot(p[1] - first[1]) + along
+    }
+
+    /// Algorithms §5.3, "give up": progress is APPROACH closer to the target along its path
+    /// than ever, or new area; a target with neither for `give_up_s` is given up, its frontier
+    /// cells within `give_up_radius` exhausted and counted. Returns whether it was given up.
+    fn watch_progress(&mut self, tick: u64, dt: f64, p: [f64; 2]) -> bool {
+        let Some(f) = self.chosen else {
+            return false;
+        };
+        let t = &mut self.track;
+        if t.target
+            .is_none_or(|o| (o[0] - f.x).hypot(o[1] - f.y) >= NEW_TARGET_M)
+        {
+            (t.target, t.best) = (Some([f.x, f.y]), f64::INFINITY);
+        }
+        let left = self.path_left(p);
+        let t = &mut self.track;
+        if !t.best.is_finite() {
+            t.best = left;
+        } else if left < t.best - self.config.approach {
+            (t.best, t.since) = (left, tick);
+        }
+        let window = (self.config.give_up_s / dt).ceil() as u64;
+        if tick.saturating_sub(t.since) < window.max(1) {
+            return false;
+        }
+        self.selector
+            .exhaust_around(f.cell, self.config.give_up_radius);
+        self.give_ups = self.give_ups.saturating_add(1);
+        (t.since, t.target) = (tick, None);
+        self.chosen = None;
+        true
     }
 
     /// The chosen frontier.
@@ -483,7 +631,8 @@ impl Planner for FrontierExplorer {
                 mode: MODE_EXPLORE,
             };
         };
-        if self.needs_selection(grid, input.tick, p) {
+        let gave_up = self.watch_progress(input.tick, input.dt, p);
+        if gave_up || self.needs_selection(grid, input.tick, p) {
             // Reached, yet still a frontier: nothing to gain there (algorithms §5, "complete").
             let (w, h) = (grid.width as usize, grid.height as usize);
             if let Some(f) = self.chosen
@@ -495,6 +644,12 @@ impl Planner for FrontierExplorer {
             self.last_select = Some(input.tick);
             self.selections += 1;
             self.chosen = self.selector.select(grid, p);
+            let unexplored = self.selector.unexplored();
+            if unexplored.saturating_add(NEW_AREA_CELLS) <= self.track.unexplored
+                || self.track.unexplored == u32::MAX
+            {
+                (self.track.unexplored, self.track.since) = (unexplored, input.tick);
+            }
             self.follow.set_path(self.selector.path());
             if self.chosen.is_some() {
                 self.misses = 0;
@@ -562,6 +717,7 @@ impl Planner for FrontierExplorer {
         (status.frontier_x, status.frontier_y) = (0.0, 0.0);
         status.n_path = 0;
         status.bounces = 0;
+        status.give_ups = self.give_ups;
         if self.done {
             status.flags |= STATUS_EXPLORATION_COMPLETE;
             return;
@@ -713,19 +869,95 @@ mod tests {
         )
     }
 
-    /// Half a room unexplored, its frontier 1.5 m away and reachable: never done, however long
-    /// (ten re-selections) the robot takes to get there.
+    /// Half a room unexplored, its frontier 1.5 m away and reachable: never done while the
+    /// robot takes its time (five re-selections) within the give-up window.
     #[test]
     fn a_reachable_frontier_with_gain_is_never_done() {
         let g = half_explored_room();
         let mut e = explorer();
-        let modes = hold(&mut e, &g, mole_types::Pose2::new(0.5, 2.0, 0.0), 2000);
+        let modes = hold(&mut e, &g, mole_types::Pose2::new(0.5, 2.0, 0.0), 1100);
         assert!(
             !modes.contains(&MODE_DONE),
             "done with half the room unexplored"
         );
         assert!(e.chosen().is_some_and(|f| f.x > 1.9 && f.x < 2.1));
-        assert!(e.selections() >= 10 && !e.done());
+        assert!(e.selections() >= 5 && !e.done() && e.give_ups() == 0);
+    }
+
+    /// Algorithms §5.3, "give up": the robot held where it is never approaches the target;
+    /// after `give_up_s` without approach or new area the target is given up and counted, the
+    /// next one likewise, and once the whole frontier is given up exploration is complete.
+    #[test]
+    fn a_target_not_approached_in_time_is_given_up_and_counted_then_done() {
+        let g = half_explored_room();
+        let mut e = explorer();
+        let pose = mole_types::Pose2::new(0.5, 2.0, 0.0);
+        let window = (FrontierConfig::default().give_up_s / 0.01) as usize;
+        let mut c = Command::STOP;
+        let mut first = None;
+        for tick in 0..10_000u64 {
+            c = e.step(&PlannerInput {
+                tick,
+                dt: 0.01,
+                pose,
+                scan: None,
+                tactile: None,
+                grid: Some(&g),
+                last_command: c,
+            });
+            if first.is_none() && e.give_ups() > 0 {
+                first = Some(tick as usize);
+            }
+            if c.mode == MODE_DONE {
+                break;
+            }
+        }
+        let first = first.unwrap_or_else(|| panic!("never given up"));
+        assert!(
+            (window..window + 10).contains(&first),
+            "first give-up at step {first}, window {window}"
+        );
+        assert_eq!(
+            c.mode,
+            MODE_DONE,
+            "not done after {} give-ups",
+            e.give_ups()
+        );
+        assert!(e.give_ups() >= 2, "{}", e.give_ups());
+        let mut st: Box<PlanStatus> = bytemuck::zeroed_box();
+        e.write_status(&mut st);
+        assert_eq!(st.give_ups, e.give_ups());
+        assert_ne!(st.flags & STATUS_EXPLORATION_COMPLETE, 0);
+    }
+
+    /// Algorithms §5.3: the only frontier lies behind a 0.3 m gap, narrower than the inflated
+    /// robot (and than the robot itself); the robot stands inside the inflation beside the wall.
+    /// The frontier is never chosen and exploration is complete.
+    #[test]
+    fn a_frontier_behind_a_gap_too_narrow_is_never_chosen_and_then_done() {
+        let mut g = corridor();
+        for r in 0..20 {
+            g.cells[r * 60 + 50..r * 60 + 60].fill(CELL_FREE);
+            if !(9..12).contains(&r) {
+                g.cells[r * 60 + 15] = CELL_OCCUPIED;
+            }
+        }
+        let mut e = explorer();
+        let pose = mole_types::Pose2::new(1.75, 1.0, 0.0);
+        let mut c = Command::STOP;
+        for tick in 0..400 {
+            c = e.step(&PlannerInput {
+                tick,
+                dt: 0.01,
+                pose,
+                scan: None,
+                tactile: None,
+                grid: Some(&g),
+                last_command: c,
+            });
+            assert!(e.chosen().is_none(), "step {tick}: chose {:?}", e.chosen());
+        }
+        assert!(e.done() && c.mode == MODE_DONE);
     }
 
     /// Standing at the frontier while it stays (the sensors cannot explore it): it is
