@@ -137,6 +137,11 @@ pub struct DwaConfig {
     pub stray_distance: f64,
     /// Inflation (m) of the global path over the robot radius + `safety_margin`.
     pub inflation_margin: f64,
+    /// A robot whose path left to the goal has not shrunk by `progress_epsilon` in this long
+    /// (s) closes the tightest spot just ahead on its path and re-plans around it.
+    pub no_progress_time: f64,
+    /// Progress (m) along the global path that counts (see `no_progress_time`).
+    pub progress_epsilon: f64,
 }
 
 impl DwaConfig {
@@ -166,6 +171,8 @@ impl Default for DwaConfig {
             replan_every: 100,
             stray_distance: 0.5,
             inflation_margin: 0.05,
+            no_progress_time: 6.0,
+            progress_epsilon: 0.25,
         }
     }
 }
@@ -343,6 +350,10 @@ pub struct Dwa {
     global: GlobalPath,
     last_plan: Option<u64>,
     replan_requested: bool,
+    /// The shortest path left to the goal (m) so far, and the tick it was reached.
+    progress: (f64, u64),
+    /// Re-plans around a spot the robot did not get through.
+    detours: u64,
     /// Steps the DWA has chosen to stand still short of its aim.
     stuck: u32,
     /// Recovery steps left.
@@ -390,6 +401,8 @@ impl Dwa {
             global: GlobalPath::new(),
             last_plan: None,
             replan_requested: true,
+            progress: (f64::INFINITY, 0),
+            detours: 0,
             stuck: 0,
             unstick: 0,
             field: DistanceField::with_capacity(mole_types::MAX_GRID_CELLS),
@@ -433,14 +446,35 @@ impl Dwa {
         self.follow(input)
     }
 
+    /// Re-plans around spots the robot did not get through so far (algorithms §4.2).
+    pub fn detours(&self) -> u64 {
+        self.detours
+    }
+
     /// Re-plans the global path when due (none yet, every `replan_every` steps, asked for, the
-    /// robot strayed, or the grid changed and blocks it) and returns the carrot.
+    /// robot strayed, the grid changed and blocks a segment ahead, or the robot made no
+    /// progress along it) and returns the carrot (algorithms §4.2, "Aim point").
     fn update_global(&mut self, input: &PlannerInput, grid: &Grid) -> Option<[f64; 2]> {
         let p = [input.pose.x, input.pose.y];
         let changed = self.field.update(grid);
-        let cfg = &self.config;
+        let cfg = self.config;
         let keep = self.limits.radius + cfg.safety_margin + cfg.inflation_margin;
-        let due = self.replan_requested
+        let stuck = !self.global.is_empty()
+            && input.tick.saturating_sub(self.progress.1) as f64 * input.dt >= cfg.no_progress_time;
+        if stuck {
+            // Circling short of a spot it cannot pass: close the tightest spot just ahead and go
+            // another way round; with no other way left, open every closed spot again.
+            match self
+                .global
+                .tightest_ahead(&self.field, cfg.lookahead + keep)
+            {
+                Some(q) => self.global.avoid(q, keep),
+                None => self.global.forget_avoided(),
+            }
+            self.detours += 1;
+        }
+        let due = stuck
+            || self.replan_requested
             || self.global.is_empty()
             || self
                 .last_plan
@@ -450,15 +484,35 @@ impl Dwa {
         if due {
             self.replan_requested = false;
             self.last_plan = Some(input.tick);
-            // Prefer a path with room to spare; fall back to the bare inflation.
-            let roomy = keep + cfg.safety_margin + 0.1;
-            if !self.global.plan(grid, &self.field, p, self.goal, roomy)
-                || self.global.kind() == crate::global_path::PathKind::Optimistic
-            {
-                self.global.plan(grid, &self.field, p, self.goal, keep);
+            let before = self.progress.0;
+            if !self.plan_global(grid, p, keep) && !self.global.avoided().is_empty() {
+                self.global.forget_avoided();
+                self.plan_global(grid, p, keep);
+            }
+            let left = self.global.remaining_length(p);
+            // A new way (round a closed spot), or one longer than the best so far (the grid
+            // showed more): progress is measured afresh.
+            if stuck || left.is_nan() || left >= before + cfg.progress_epsilon {
+                self.progress = (left, input.tick);
             }
         }
-        self.global.carrot(p, self.config.lookahead)
+        let carrot = self.global.carrot(p, cfg.lookahead);
+        let left = self.global.remaining_length(p);
+        if left < self.progress.0 - cfg.progress_epsilon || self.global.is_empty() {
+            self.progress = (left, input.tick);
+        }
+        carrot
+    }
+
+    /// One A* plan: with room to spare first, then the bare inflation `keep`.
+    fn plan_global(&mut self, grid: &Grid, p: [f64; 2], keep: f64) -> bool {
+        let roomy = keep + self.config.safety_margin + 0.1;
+        if self.global.plan(grid, &self.field, p, self.goal, roomy)
+            && self.global.kind() != crate::global_path::PathKind::Optimistic
+        {
+            return true;
+        }
+        self.global.plan(grid, &self.field, p, self.goal, keep)
     }
 
     /// The point obstacles (scan points, or PythonRobotics' obstacle list), world frame.
@@ -925,6 +979,8 @@ impl Planner for Dwa {
         self.goal = goal;
         self.aim = goal;
         self.global.clear();
+        self.global.forget_avoided();
+        self.progress = (f64::INFINITY, 0);
         self.replan_requested = true;
         true
     }
@@ -1228,6 +1284,87 @@ mod tests {
 
     /// A robot already inside its margin beside a wall, its aim inside the margin too, never
     /// creeps closer than where it starts: the limit is not re-measured step by step.
+    /// 4 m × 4 m at 0.05 m, a wall at x = 2 m with two gaps of 0.8 m, at y ∈ [1, 1.8) and
+    /// y ∈ [2.6, 3.4): room for the path's bare inflation, not for its roomy one.
+    fn two_gaps() -> Box<Grid> {
+        let mut g = crate::obstacles::test_support::grid_free(80, 80, 0.05);
+        for r in (0..80).filter(|r| !(20..36).contains(r) && !(52..68).contains(r)) {
+            g.cells[r * 80 + 40] = mole_types::CELL_OCCUPIED;
+        }
+        g
+    }
+
+    /// Whether the path crosses x = 2 m within 0.3 m of `y`.
+    fn crosses_at(path: &GlobalPath, y: f64) -> bool {
+        path.points().windows(2).any(|s| {
+            let t = (2.025 - s[0][0]) / (s[1][0] - s[0][0]);
+            (0.0..=1.0).contains(&t) && (s[0][1] + t * (s[1][1] - s[0][1]) - y).abs() < 0.3
+        })
+    }
+
+    fn held_at(tick: u64, pose: mole_types::Pose2, g: &Grid) -> PlannerInput<'_> {
+        PlannerInput {
+            tick,
+            dt: 0.05,
+            pose,
+            scan: None,
+            tactile: None,
+            grid: Some(g),
+            last_command: Command::STOP,
+        }
+    }
+
+    /// A grid that closes the gap the path runs through re-plans at once, through the other.
+    #[test]
+    fn a_path_the_grid_blocks_is_planned_again_at_once() {
+        let mut g = two_gaps();
+        let pose = mole_types::Pose2::new(1.0, 1.4, 0.0);
+        let mut d = Dwa::new(limits(), DwaConfig::default(), [3.0, 1.4]);
+        d.step(&held_at(0, pose, &g));
+        assert!(
+            crosses_at(d.global_path(), 1.4),
+            "{:?}",
+            d.global_path().points()
+        );
+        for r in 20..36 {
+            g.cells[r * 80 + 40] = mole_types::CELL_OCCUPIED;
+        }
+        d.step(&held_at(1, pose, &g));
+        assert!(
+            crosses_at(d.global_path(), 3.0),
+            "not re-planned through the other gap: {:?}",
+            d.global_path().points()
+        );
+    }
+
+    /// A robot that makes no progress along its path (held in front of the gap) closes the
+    /// tightest spot ahead and re-plans the other way round instead of circling there.
+    #[test]
+    fn a_robot_without_progress_plans_round_the_spot_it_cannot_pass() {
+        let g = two_gaps();
+        let pose = mole_types::Pose2::new(1.0, 1.4, 0.0);
+        let mut d = Dwa::new(limits(), DwaConfig::default(), [3.0, 1.4]);
+        let no_progress = (DwaConfig::default().no_progress_time / 0.05) as u64;
+        for tick in 0..no_progress {
+            d.step(&held_at(tick, pose, &g));
+        }
+        assert!(
+            crosses_at(d.global_path(), 1.4),
+            "{:?}",
+            d.global_path().points()
+        );
+        assert_eq!(d.detours(), 0, "too early");
+        for tick in no_progress..no_progress + 5 {
+            d.step(&held_at(tick, pose, &g));
+        }
+        assert_eq!(d.detours(), 1);
+        assert!(
+            crosses_at(d.global_path(), 3.0) && !crosses_at(d.global_path(), 1.4),
+            "still through the gap it did not pass: {:?}",
+            d.global_path().points()
+        );
+    }
+
     #[test]
     fn a_robot_inside_the_margin_does_not_creep_closer() {
         // 4 m × 4 m at 0.05 m, a wall whose face is at x = 2 m, the full height.
