@@ -111,21 +111,62 @@ fn a_suite_runs_reports_repeats_and_checks_against_a_baseline() {
         "{text}"
     );
     assert!(!text.contains("worse than the baseline: success"), "{text}");
-    // Against its own report, the same suite passes.
-    let same = eval_command(&dir.0.join("same"), &["--check", json.to_str().unwrap()])
-        .output()
-        .expect("run mole eval --check");
+    // Against its own report, the same suite passes, and draws itself beside the baseline.
+    let plot = dir.0.join("suites.png");
+    let same = eval_command(
+        &dir.0.join("same"),
+        &[
+            "--check",
+            json.to_str().unwrap(),
+            "--plot",
+            plot.to_str().unwrap(),
+            "--beside",
+            json.to_str().unwrap(),
+        ],
+    )
+    .output()
+    .expect("run mole eval --check --plot");
     assert!(same.status.success(), "{}", output_text(&same));
+    let png = std::fs::read(&plot).expect("the plot");
+    assert!(png.starts_with(b"\x89PNG\r\n\x1a\n"), "not a PNG");
+    // A slice (its first world alone) is compared world by world with the baseline's own run
+    // of that world (check.rs), and passes.
+    let slice = Command::new(bin_dir().join("mole"))
+        .current_dir(workspace())
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .args([
+            "eval",
+            "--family",
+            "clutter",
+            "--worlds",
+            "1",
+            "--planner",
+            "dwa",
+        ])
+        .args(["--jobs", "1", "--out"])
+        .arg(dir.0.join("slice"))
+        .args(["--check", json.to_str().unwrap()])
+        .output()
+        .expect("run a slice");
+    assert!(slice.status.success(), "{}", output_text(&slice));
     assert_eq!(left_behind(&before), Vec::<String>::new());
 }
 
-/// An unknown family, no worlds, a bad swap, a baseline that is not a report or frontier in
-/// the dark: exit 2, one line naming what was wrong, and no world written.
+/// An unknown family, no worlds, a bad swap, a baseline that is not a report or is another
+/// family's, a `--beside` that is not a report, `--baselines` with a suite's own options:
+/// exit 2, one line naming what was wrong, and no world written.
 #[test]
 fn bad_eval_input_is_refused_before_any_world_runs() {
     let dir = TempDir::new("eval-bad");
     let garbage = dir.0.join("garbage.json");
     std::fs::write(&garbage, "not json").unwrap();
+    let rooms = dir.0.join("rooms.json");
+    let report = serde_json::json!({
+        "family": "rooms", "parameters": "", "planner": "dwa", "estimator": "default",
+        "first_seed": 0, "worlds": [], "aggregate": {}, "wall_time_s": 1.0, "jobs": 1
+    });
+    std::fs::write(&rooms, report.to_string()).unwrap();
     for (args, expected) in [
         (
             vec!["eval", "--family", "mazes"],
@@ -148,6 +189,32 @@ fn bad_eval_input_is_refused_before_any_world_runs() {
                 garbage.to_str().unwrap(),
             ],
             "not a mole eval report",
+        ),
+        (
+            vec![
+                "eval",
+                "--family",
+                "maze",
+                "--check",
+                rooms.to_str().unwrap(),
+            ],
+            "the baseline is of `rooms`, this suite of `maze`",
+        ),
+        (
+            vec![
+                "eval",
+                "--family",
+                "maze",
+                "--plot",
+                "p.png",
+                "--beside",
+                garbage.to_str().unwrap(),
+            ],
+            "--beside",
+        ),
+        (
+            vec!["eval", "--baselines", "b", "--family", "maze"],
+            "cannot be used with",
         ),
     ] {
         let out = dir.0.join("out");

@@ -6,7 +6,10 @@
 //! The worlds are ordinary scenario files (`OUT/worlds/NAME.toml`), so any run can be repeated
 //! by hand with `mole up --mode lockstep --scenario OUT/worlds/NAME.toml --seed SEED`.
 
+pub mod baselines;
+pub mod check;
 pub mod metrics;
+pub mod plot;
 
 use crate::parse_swap;
 use crate::up::{Failure, RunEnd, build_process_binaries, choices};
@@ -20,8 +23,8 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 
 /// Exploration runs (no goal to reach) end by themselves or after this many steps (300 s at
 /// 100 Hz).
@@ -36,8 +39,8 @@ const NAVIGATION_SLACK_S: f64 = 10.0;
 pub struct EvalArgs {
     /// The world family: maze, rooms, clutter, cellular or corridors, each also `-dark` (no
     /// lidar, no fix), e.g. `maze-dark`.
-    #[arg(long)]
-    pub family: String,
+    #[arg(long, required_unless_present = "baselines")]
+    pub family: Option<String>,
     /// How many worlds, seeds `--first-seed` onwards.
     #[arg(long, default_value_t = 50)]
     pub worlds: u64,
@@ -76,6 +79,23 @@ pub struct EvalArgs {
     /// is worse than the baseline's 95% interval.
     #[arg(long, value_name = "BASELINE")]
     pub check: Option<PathBuf>,
+    /// Draw the metrics' distributions as a PNG: one panel per metric, this run beside the
+    /// `--beside` reports and the `--check` baseline.
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+    /// A stored report (an earlier `--json`, e.g. another planner on the same family) drawn
+    /// beside this run in `--plot`; repeatable.
+    #[arg(long, value_name = "REPORT", requires = "plot")]
+    pub beside: Vec<PathBuf>,
+    /// Run every stored suite (every planner on every family, every estimator on its
+    /// families) and write their reports and plots under DIR, as `eval/baselines/` holds them
+    /// (`scripts/eval-baselines.sh`).
+    #[arg(
+        long,
+        value_name = "DIR",
+        conflicts_with_all = ["family", "planner", "estimator", "local_planner", "task", "swaps", "ticks", "json", "check", "plot"]
+    )]
+    pub baselines: Option<PathBuf>,
 }
 
 /// What a suite's runs are judged on.
@@ -124,16 +144,43 @@ struct Job {
     scenario: PathBuf,
 }
 
-/// Runs the suite; exit 1 when a run failed or `--check` found a regression, 2 for bad input.
+/// Runs the suite (or, with `--baselines`, every stored suite); exit 1 when a run failed or
+/// `--check` found a regression, 2 for bad input.
 pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
-    let spec = WorldSpec::parse(&args.family).map_err(Failure::input)?;
+    if let Some(dir) = &args.baselines {
+        return run_baselines(args, dir);
+    }
+    let family = args.family.as_deref().unwrap_or_default();
+    let spec = WorldSpec::parse(family).map_err(Failure::input)?;
     for swap in &args.swaps {
         parse_swap(swap).map_err(|e| Failure::input(e.to_string()))?;
     }
     if args.worlds == 0 {
         return Err(Failure::input("--worlds: expected at least 1"));
     }
-    let baseline = args.check.as_deref().map(read_report).transpose()?;
+    let baseline = args
+        .check
+        .as_deref()
+        .map(|path| read_report("--check", path))
+        .transpose()?;
+    if let Some(b) = baseline.as_ref().filter(|b| b.family != spec.label()) {
+        return Err(Failure::input(format!(
+            "--check: the baseline is of `{}`, this suite of `{}`",
+            b.family,
+            spec.label()
+        )));
+    }
+    let beside = args
+        .beside
+        .iter()
+        .map(|path| read_report("--beside", path))
+        .collect::<Result<Vec<_>, _>>()?;
+    if beside.len() + 1 + usize::from(baseline.is_some()) > plot::MAX_SUITES {
+        return Err(Failure::input(format!(
+            "--beside: at most {} suites fit in one plot, with this run and the baseline",
+            plot::MAX_SUITES
+        )));
+    }
     let jobs = args
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
@@ -160,9 +207,12 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
             .map_err(|e| Failure::run(format!("{}: {e}", path.display())))?;
         suite.push(job(&scenario, path, seed, navigation, args.ticks));
     }
+    // Named before the build: under `cargo run -p mole-launch` the workspace build relinks this
+    // very binary, and the running one's own path then reads as deleted.
+    let mole = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("mole"));
     build_process_binaries(false)?;
     let started = std::time::Instant::now();
-    let (results, interrupted) = run_all(args, &suite, jobs);
+    let (results, interrupted) = run_all(args, &mole, &suite, jobs);
     let report = EvalReport {
         family: spec.label(),
         parameters: spec.describe(),
@@ -184,8 +234,21 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
         std::fs::write(path, text + "\n")
             .map_err(|e| Failure::run(format!("{}: {e}", path.display())))?;
     }
-    let failed = report.worlds.iter().filter(|w| w.exit_code != 0).count();
     let mut problems = Vec::new();
+    if let Some(path) = &args.plot {
+        let baseline = baseline.as_ref().map(|b| EvalReport {
+            planner: format!("{} (baseline)", b.planner),
+            ..b.clone()
+        });
+        let suites: Vec<&EvalReport> = std::iter::once(&report)
+            .chain(&beside)
+            .chain(&baseline)
+            .collect();
+        if let Err(e) = plot::write_plot(&suites, path) {
+            problems.push(e);
+        }
+    }
+    let failed = report.worlds.iter().filter(|w| w.exit_code != 0).count();
     if interrupted {
         problems.push(format!(
             "interrupted: {} of {} worlds ran to their end; the report holds only those",
@@ -201,12 +264,74 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
         ));
     }
     if let Some(baseline) = &baseline {
-        for found in regressions(&baseline.aggregate, &report.aggregate) {
-            problems.push(match found {
-                Ok(r) => format!("worse than the baseline: {r}"),
-                Err(e) => format!("worse than the baseline: {e}"),
-            });
+        if check::is_slice(&baseline.worlds, &report.worlds) {
+            let found =
+                check::world_regressions(&baseline.worlds, &baseline.aggregate, &report.worlds);
+            problems.extend(
+                found
+                    .into_iter()
+                    .map(|r| format!("worse than the baseline: {r}")),
+            );
+        } else {
+            for found in regressions(&baseline.aggregate, &report.aggregate) {
+                problems.push(match found {
+                    Ok(r) => format!("worse than the baseline: {r}"),
+                    Err(e) => format!("worse than the baseline: {e}"),
+                });
+            }
         }
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(Failure::run(problems.join("\n")))
+    }
+}
+
+/// Every stored suite, one after the other, each report to `dir/FILE` and each family's suites
+/// drawn side by side; the suites that fail are named at the end and the rest still run.
+fn run_baselines(args: &EvalArgs, dir: &Path) -> Result<(), Failure> {
+    let suites = baselines::suites();
+    let mut problems = Vec::new();
+    for (i, suite) in suites.iter().enumerate() {
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            break;
+        }
+        let json = dir.join(suite.file());
+        if let Some(parent) = json.parent() {
+            std::fs::create_dir_all(parent)
+                .map_err(|e| Failure::input(format!("{}: {e}", parent.display())))?;
+        }
+        tracing::info!("suite {} of {}: {}", i + 1, suites.len(), suite.file());
+        let one = EvalArgs {
+            family: Some(suite.family.clone()),
+            planner: Some(suite.planner),
+            estimator: suite.estimator,
+            task: Some(suite.task),
+            ticks: suite.ticks,
+            out: args.out.join(suite.file().trim_end_matches(".json")),
+            json: Some(json),
+            baselines: None,
+            ..args.clone()
+        };
+        if let Err(e) = eval(&one) {
+            problems.push(format!("{}: {}", suite.file(), e.message));
+        }
+    }
+    let mut plots: BTreeMap<String, Vec<EvalReport>> = BTreeMap::new();
+    for suite in &suites {
+        if let Ok(report) = read_report("--baselines", &dir.join(suite.file())) {
+            plots.entry(suite.plot()).or_default().push(report);
+        }
+    }
+    for (file, reports) in &plots {
+        let suites: Vec<&EvalReport> = reports.iter().collect();
+        if let Err(e) = plot::write_plot(&suites, &dir.join(file)) {
+            problems.push(e);
+        }
+    }
+    if INTERRUPTED.load(Ordering::SeqCst) {
+        problems.push("interrupted: the suites after it did not run".into());
     }
     if problems.is_empty() {
         Ok(())
@@ -254,22 +379,25 @@ fn job(scenario: &Scenario, path: PathBuf, seed: u64, navigation: bool, ticks: O
     }
 }
 
+/// Set by Ctrl-C: no more worlds (or suites) start.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
 /// Runs every job, `jobs` at a time, with a progress bar. Ctrl-C starts no more and leaves out
 /// the runs it cut short; the second value says whether that happened.
-fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> (Vec<WorldMetrics>, bool) {
+fn run_all(args: &EvalArgs, mole: &Path, suite: &[Job], jobs: usize) -> (Vec<WorldMetrics>, bool) {
     let bar = ProgressBar::new(suite.len() as u64).with_style(
         ProgressStyle::with_template(
             "{bar:40} {pos}/{len} worlds {elapsed_precise} eta {eta} {msg}",
         )
         .expect("a valid template"),
     );
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let interrupted = interrupted.clone();
+    static HANDLER: std::sync::Once = std::sync::Once::new();
+    HANDLER.call_once(|| {
         // A second handler cannot be set when the process already has one; Ctrl-C then just
         // reaches the children, which end their runs.
-        let _ = ctrlc::set_handler(move || interrupted.store(true, Ordering::SeqCst));
-    }
+        let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+    });
+    let interrupted = &INTERRUPTED;
     let next = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<WorldMetrics>>> = Mutex::new(vec![None; suite.len()]);
     std::thread::scope(|scope| {
@@ -280,7 +408,7 @@ fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> (Vec<WorldMetrics>, b
                     if i >= suite.len() || interrupted.load(Ordering::SeqCst) {
                         break;
                     }
-                    let Some(metrics) = run_one(args, &suite[i], i) else {
+                    let Some(metrics) = run_one(args, mole, &suite[i], i) else {
                         break;
                     };
                     if metrics.exit_code != 0 {
@@ -305,11 +433,10 @@ fn run_all(args: &EvalArgs, suite: &[Job], jobs: usize) -> (Vec<WorldMetrics>, b
 
 /// One world's run by a `mole up` of its own, in a namespace of its own; `None` when Ctrl-C
 /// cut it short (its metrics would be those of a part of the run).
-fn run_one(args: &EvalArgs, job: &Job, index: usize) -> Option<WorldMetrics> {
+fn run_one(args: &EvalArgs, mole: &Path, job: &Job, index: usize) -> Option<WorldMetrics> {
     let out = args.out.join("runs").join(&job.info.name);
     let log_path = args.out.join("runs").join(format!("{}.log", job.info.name));
-    let exe = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("mole"));
-    let mut command = Command::new(exe);
+    let mut command = Command::new(mole);
     command
         .args(["up", "--quiet", "--mode", "lockstep", "--scenario"])
         .arg(&job.scenario)
@@ -361,12 +488,12 @@ fn run_one(args: &EvalArgs, job: &Job, index: usize) -> Option<WorldMetrics> {
 }
 
 /// A stored report, for `--check`: a file that is not one is bad input, named.
-fn read_report(path: &Path) -> Result<EvalReport, Failure> {
+fn read_report(flag: &str, path: &Path) -> Result<EvalReport, Failure> {
     let text = std::fs::read_to_string(path)
-        .map_err(|e| Failure::input(format!("--check {}: {e}", path.display())))?;
+        .map_err(|e| Failure::input(format!("{flag} {}: {e}", path.display())))?;
     serde_json::from_str(&text).map_err(|e| {
         Failure::input(format!(
-            "--check {}: not a mole eval report ({e}), expected a file `mole eval --json` wrote",
+            "{flag} {}: not a mole eval report ({e}), expected a file `mole eval --json` wrote",
             path.display()
         ))
     })

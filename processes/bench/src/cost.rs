@@ -8,14 +8,9 @@ use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::path::Path;
-use std::sync::Once;
 
 /// Width and height of every plot (px).
 pub const PLOT_SIZE: (u32, u32) = (900, 500);
-
-/// The plots' font: DejaVu Sans Mono (assets/DejaVuSansMono-LICENSE.txt), so that drawing text
-/// needs no system font library.
-const FONT: &[u8] = include_bytes!("../assets/DejaVuSansMono.ttf");
 
 /// One measured point of a sweep.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -103,27 +98,12 @@ pub fn point_from_reports(
 
 /// Writes `sweep` as a PNG of [`PLOT_SIZE`] to `path`.
 pub fn write_plot(sweep: &Sweep, path: &Path) -> Result<(), String> {
-    let file = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let (width, height) = PLOT_SIZE;
-    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
-    let pixels = render(sweep)?;
-    let mut writer = encoder
-        .write_header()
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    writer
-        .write_image_data(&pixels)
-        .map_err(|e| format!("{}: {e}", path.display()))
+    crate::canvas::write_png(path, PLOT_SIZE, &render(sweep)?)
 }
 
 /// `sweep` drawn into an RGB buffer of [`PLOT_SIZE`].
 pub fn render(sweep: &Sweep) -> Result<Vec<u8>, String> {
-    static FONT_REGISTERED: Once = Once::new();
-    FONT_REGISTERED.call_once(|| {
-        // The font is ours and parses; a failure would leave the text out, not the lines.
-        _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
-    });
+    crate::canvas::register_font();
     if sweep.points.is_empty() {
         return Err(format!("sweep {} has no point", sweep.name));
     }

@@ -17,6 +17,7 @@
 //! It also measures how the whole stack's cost grows (`scripts/cost-growth.sh`): `mole-observer`
 //! ([`observer`]) reads every topic, `mole-plot` ([`cost`]) gathers the points and draws them.
 
+pub mod canvas;
 pub mod cost;
 mod driver;
 mod floor;
