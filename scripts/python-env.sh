@@ -3,9 +3,11 @@
 # examples/python_planner needs (tests/python.rs uses it when it is there), at the version the
 # Rust side is built against (Cargo.lock): iceoryx2 services refuse another version; and the mcap
 # package, an MCAP implementation independent of the Rust crate, that tests/record.rs reads
-# recordings with.
+# recordings with; and the gtsam package (GTSAM, BSD), the reference optimiser that
+# processes/localization/tests/g2o.rs compares GraphSLAM's optimum on g2o graphs with
+# (scripts/gtsam-reference.py).
 # Usage: scripts/python-env.sh
-# Idempotent: an environment that already has both packages is left as it is. It never fails:
+# Idempotent: an environment that already has all three packages is left as it is. It never fails:
 # without python3, venv or the package registry it says why in one line and exits 0, and the
 # Python tests are then skipped with that reason.
 set -uo pipefail
@@ -14,6 +16,7 @@ cd "$(dirname "$0")/.."
 version="$(sed -n '/^name = "iceoryx2"$/{n;s/^version = "\(.*\)"$/\1/p;}' Cargo.lock 2>/dev/null)"
 env_dir="target/python-env"
 mcap_version="1.6.0"
+gtsam_version="4.3.0"
 python="$env_dir/bin/python3"
 log="$env_dir/pip.log"
 
@@ -27,11 +30,16 @@ has_mcap() {
 sys.exit(m.version('mcap') != '$mcap_version')" >/dev/null 2>&1
 }
 
+has_gtsam() {
+    "$python" -c "import sys, importlib.metadata as m, gtsam
+sys.exit(m.version('gtsam') != '$gtsam_version')" >/dev/null 2>&1
+}
+
 if [ -z "$version" ]; then
     echo "python-env: Cargo.lock names no iceoryx2 version, so no $env_dir"
     exit 0
 fi
-if [ -x "$python" ] && has_iceoryx2 && has_mcap; then
+if [ -x "$python" ] && has_iceoryx2 && has_mcap && has_gtsam; then
     exit 0
 fi
 if ! command -v python3 >/dev/null 2>&1; then
@@ -44,8 +52,8 @@ if [ ! -x "$python" ] && ! python3 -m venv "$env_dir" >/dev/null 2>&1; then
     exit 0
 fi
 if ! "$python" -m pip install --disable-pip-version-check --timeout 30 --retries 2 \
-    "iceoryx2==$version" "mcap==$mcap_version" >"$log" 2>&1; then
-    echo "python-env: pip could not install iceoryx2==$version and mcap==$mcap_version (no network or no wheel for this platform; see $log)"
+    "iceoryx2==$version" "mcap==$mcap_version" "gtsam==$gtsam_version" >"$log" 2>&1; then
+    echo "python-env: pip could not install iceoryx2==$version, mcap==$mcap_version and gtsam==$gtsam_version (no network or no wheel for this platform; see $log)"
     exit 0
 fi
 if ! has_iceoryx2; then
@@ -56,4 +64,8 @@ if ! has_mcap; then
     echo "python-env: mcap==$mcap_version installed but does not import (see $log)"
     exit 0
 fi
-echo "python-env: iceoryx2 $version and mcap $mcap_version ready in $env_dir"
+if ! has_gtsam; then
+    echo "python-env: gtsam==$gtsam_version installed but does not import (see $log)"
+    exit 0
+fi
+echo "python-env: iceoryx2 $version, mcap $mcap_version and gtsam $gtsam_version ready in $env_dir"

@@ -13,6 +13,7 @@ mod error;
 pub mod eval;
 pub mod export;
 pub mod fault;
+pub mod g2o;
 pub mod hot_swap;
 pub mod inject;
 pub mod keeper;

@@ -7,6 +7,7 @@ use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
 use mole_launch::eval::{EvalArgs, eval};
 use mole_launch::export::{ExportArgs, export};
 use mole_launch::fault::{FaultArgs, fault};
+use mole_launch::g2o::{G2oArgs, g2o};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
 use mole_launch::top::{TopArgs, top};
@@ -57,6 +58,9 @@ enum Command {
     /// Run a planner and estimator over a family of generated worlds (lockstep, parallel jobs)
     /// and report success, coverage, errors and consistency with 95% intervals.
     Eval(EvalArgs),
+    /// Optimise a 2-D g2o pose graph (VERTEX_SE2, VERTEX_XY, EDGE_SE2, EDGE_SE2_XY) with
+    /// GraphSLAM's solver; report the error before and after, optionally write the optimum.
+    G2o(G2oArgs),
     /// Measure latency and throughput.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -81,6 +85,7 @@ fn main() -> ExitCode {
         Command::Status(args) => status(&args),
         Command::Fault(args) => fault(&args),
         Command::Eval(args) => eval(&args),
+        Command::G2o(args) => g2o(&args),
         Command::Top(args) => top(&args),
         Command::Record(args) => record(&args),
         Command::Replay(args) => replay(&args),

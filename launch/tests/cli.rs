@@ -32,7 +32,7 @@ fn help_lists_every_subcommand() {
         listed_subcommands(&[]),
         [
             "up", "swap", "stop", "status", "fault", "top", "record", "replay", "view", "info",
-            "export", "eval", "bench", "help"
+            "export", "eval", "g2o", "bench", "help"
         ]
     );
     assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
@@ -55,6 +55,7 @@ fn help_lists_every_subcommand() {
         &["info"],
         &["export"],
         &["eval"],
+        &["g2o"],
         &["bench", "ipc"],
         &["bench", "stack"],
     ] {
@@ -116,4 +117,60 @@ fn bench_and_top_refuse_bad_input_with_exit_2() {
         assert_eq!(output.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains("error:"), "{args:?}: {err}");
     }
+}
+
+/// `mole g2o` optimises a graph, writes the optimum where asked (a graph that reads back and is
+/// already at its optimum), and refuses a malformed file with exit 2 naming its line.
+#[test]
+fn g2o_optimises_a_graph_and_refuses_a_bad_one() {
+    let data = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../processes/localization/tests/data/g2o/noisyToyGraph.g2o"
+    );
+    let dir = std::env::temp_dir().join(format!("mole-cli-g2o-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("optimum.g2o");
+    let output = Command::new(BIN)
+        .args(["g2o", data, "--out", out.to_str().unwrap()])
+        .output()
+        .expect("run mole g2o");
+    let text = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(
+        output.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(text.contains("4 poses, 0 points, 5 edges"), "{text}");
+    let final_error = |text: &str| -> f64 {
+        let after = text.split("final ").nth(1).expect("a final error");
+        after.split(';').next().unwrap().parse().expect("a number")
+    };
+    let optimum = final_error(&text);
+    let again = Command::new(BIN)
+        .args(["g2o", out.to_str().unwrap()])
+        .output()
+        .expect("run mole g2o on the optimum");
+    let again_text = String::from_utf8_lossy(&again.stdout).into_owned();
+    assert!(again.status.success(), "{again_text}");
+    let initial = again_text.split("initial ").nth(1).unwrap();
+    let initial: f64 = initial.split(',').next().unwrap().parse().unwrap();
+    assert!(
+        (initial - optimum).abs() <= 1e-9 * optimum.max(1.0),
+        "the written optimum starts at {initial}, not {optimum}"
+    );
+
+    let bad = dir.join("bad.g2o");
+    std::fs::write(
+        &bad,
+        "VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 1 0 zero 1 0 0 1 0 1\n",
+    )
+    .unwrap();
+    let refused = Command::new(BIN)
+        .args(["g2o", bad.to_str().unwrap()])
+        .output()
+        .expect("run mole g2o on a bad file");
+    let err = String::from_utf8_lossy(&refused.stderr).into_owned();
+    assert_eq!(refused.status.code(), Some(2), "{err}");
+    assert!(err.contains("bad.g2o line 2"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -20,6 +20,7 @@
 //! good initial guess.
 
 pub mod factors;
+pub mod g2o;
 mod normal_equations;
 mod problem;
 mod smoother;
