@@ -8,6 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 worlds="${1:-50}"
 jobs="${2:-$(nproc)}"
-cargo run --quiet --release -p mole-launch -- eval --baselines eval/baselines \
+cargo build --quiet --release --workspace --bins
+target/release/mole eval --baselines eval/baselines \
     --worlds "$worlds" --jobs "$jobs" --out target/eval-baselines
-MOLE_BLESS=1 cargo test --quiet -p mole-launch --test baselines
+MOLE_BLESS=1 cargo test --quiet --test baselines

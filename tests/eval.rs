@@ -285,3 +285,57 @@ fn ctrl_c_ends_the_suite_and_leaves_out_the_runs_it_cut_short() {
     assert_eq!(report(&json)["worlds"].as_array().map(Vec::len), Some(0));
     assert_eq!(left_behind(&before), Vec::<String>::new());
 }
+
+/// The slice the README's test command runs against the stored baselines (`eval/baselines/`):
+/// the first worlds of each lit family with the planner built for it, and an estimator that
+/// keeps its own map in the dark.
+const SLICE: &[&str] = &[
+    "maze/frontier-explore.json",
+    "rooms/frontier-explore.json",
+    "clutter/dwa-navigate.json",
+    "cellular/dwa-navigate.json",
+    "corridors/dwa-navigate.json",
+    "rooms-dark/estimator-ekf-slam.json",
+];
+const SLICE_WORLDS: &str = "2";
+
+/// Each suite of [`SLICE`], on its baseline's first worlds, does no worse than the baseline's own
+/// runs of them (`--check` on a slice compares world by world): an algorithm that regresses on
+/// a stored world fails the README's test command.
+#[test]
+fn a_slice_of_the_stored_baselines_does_no_worse_than_they_do() {
+    let _serial = serial();
+    let before = shm_files();
+    let dir = TempDir::new("eval-slice");
+    let suites = mole_launch::eval::baselines::suites();
+    for file in SLICE {
+        let suite = suites
+            .iter()
+            .find(|s| s.file() == *file)
+            .unwrap_or_else(|| panic!("{file} is not a stored suite"));
+        let mut command = Command::new(bin_dir().join("mole"));
+        command
+            .current_dir(workspace())
+            .env_remove("CARGO")
+            .env_remove("CARGO_MANIFEST_DIR")
+            .args(["eval", "--family", &suite.family])
+            .args(["--planner", &suite.planner.to_string()])
+            .args([
+                "--task",
+                mole_launch::eval::baselines::task_name(suite.task),
+            ])
+            .args(["--worlds", SLICE_WORLDS, "--jobs", "2", "--out"])
+            .arg(dir.0.join(file.replace('/', "-")))
+            .arg("--check")
+            .arg(workspace().join(mole_launch::eval::baselines::DIR).join(file));
+        if let Some(estimator) = suite.estimator {
+            command.args(["--estimator", &estimator.to_string()]);
+        }
+        if let Some(ticks) = suite.ticks {
+            command.args(["--ticks", &ticks.to_string()]);
+        }
+        let output = command.output().expect("run mole eval");
+        assert!(output.status.success(), "{file}: {}", output_text(&output));
+    }
+    assert_eq!(left_behind(&before), Vec::<String>::new());
+}
