@@ -135,6 +135,18 @@ fn bad_input_names_the_line_and_field() {
         let error = G2oGraph::parse(&text, "bad.g2o").expect_err(tail);
         assert_eq!(error.to_string(), format!("bad.g2o {message}"), "{tail}");
     }
+    // A vertex no edge reaches has no defined optimum: refused, named by its line.
+    let error = G2oGraph::parse(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_XY 2 1 1\nEDGE_SE2_XY 0 2 1 1 1 0 1\n",
+        "apart.g2o",
+    )
+    .expect_err("pose 1 apart");
+    assert_eq!(
+        error.to_string(),
+        "apart.g2o line 2: VERTEX_SE2 id (field 1): expected a vertex that edges join to the \
+         anchored pose (the FIXed ones, else the first VERTEX_SE2), so that the optimum is \
+         defined, found 1, which no chain of edges reaches"
+    );
     let error = G2oGraph::parse("VERTEX_XY 0 1 1\n", "points.g2o").expect_err("no pose");
     assert_eq!(
         error.to_string(),

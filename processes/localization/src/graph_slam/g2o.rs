@@ -459,11 +459,54 @@ impl G2oGraph {
                 found: format!("{} vertices, none a pose", vertices.len()),
             });
         }
-        Ok(Self {
+        let graph = Self {
             vertices,
             edges,
             fixed,
-        })
+        };
+        if let Some(v) = graph.first_unanchored() {
+            let vertex = &graph.vertices[v];
+            let tag = match vertex.value {
+                VertexValue::Se2(_) => "VERTEX_SE2",
+                VertexValue::Xy(_) => "VERTEX_XY",
+            };
+            return Err(error(
+                index[&vertex.id].1,
+                format!("{tag} id (field 1)"),
+                "a vertex that edges join to the anchored pose (the FIXed ones, else the first \
+                 VERTEX_SE2), so that the optimum is defined",
+                format!("{}, which no chain of edges reaches", vertex.id),
+            ));
+        }
+        Ok(graph)
+    }
+
+    /// The first vertex no chain of edges joins to an anchor: its position is not defined by
+    /// the graph, and the normal equations are singular there.
+    fn first_unanchored(&self) -> Option<usize> {
+        let mut neighbours = vec![Vec::new(); self.vertices.len()];
+        for edge in &self.edges {
+            let (a, b) = match *edge {
+                Edge::Se2 { from, to, .. } => (from, to),
+                Edge::Se2Xy { pose, point, .. } => (pose, point),
+            };
+            neighbours[a].push(b);
+            neighbours[b].push(a);
+        }
+        let mut reached = vec![false; self.vertices.len()];
+        let mut stack = self.anchors();
+        for &a in &stack {
+            reached[a] = true;
+        }
+        while let Some(v) = stack.pop() {
+            for &n in &neighbours[v] {
+                if !reached[n] {
+                    reached[n] = true;
+                    stack.push(n);
+                }
+            }
+        }
+        reached.iter().position(|&r| !r)
     }
 
     /// The graph as g2o text: the vertices at their current estimate, then the edges as read,
