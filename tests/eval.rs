@@ -327,7 +327,11 @@ fn a_slice_of_the_stored_baselines_does_no_worse_than_they_do() {
             .args(["--worlds", SLICE_WORLDS, "--jobs", "2", "--out"])
             .arg(dir.0.join(file.replace('/', "-")))
             .arg("--check")
-            .arg(workspace().join(mole_launch::eval::baselines::DIR).join(file));
+            .arg(
+                workspace()
+                    .join(mole_launch::eval::baselines::DIR)
+                    .join(file),
+            );
         if let Some(estimator) = suite.estimator {
             command.args(["--estimator", &estimator.to_string()]);
         }
