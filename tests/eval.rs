@@ -18,12 +18,20 @@ const SUITE: [&str; 8] = [
     "--jobs",
 ];
 
-fn eval_command(out: &Path, extra: &[&str]) -> Command {
+/// `mole`, run from the workspace as a user would: not under cargo's environment, so it builds
+/// nothing.
+fn mole() -> Command {
     let mut command = Command::new(bin_dir().join("mole"));
     command
         .current_dir(workspace())
         .env_remove("CARGO")
-        .env_remove("CARGO_MANIFEST_DIR")
+        .env_remove("CARGO_MANIFEST_DIR");
+    command
+}
+
+fn eval_command(out: &Path, extra: &[&str]) -> Command {
+    let mut command = mole();
+    command
         .args(SUITE)
         .arg("2")
         .arg("--out")
@@ -131,10 +139,7 @@ fn a_suite_runs_reports_repeats_and_checks_against_a_baseline() {
     assert!(png.starts_with(b"\x89PNG\r\n\x1a\n"), "not a PNG");
     // A slice (its first world alone) is compared world by world with the baseline's own run
     // of that world (check.rs), and passes.
-    let slice = Command::new(bin_dir().join("mole"))
-        .current_dir(workspace())
-        .env_remove("CARGO")
-        .env_remove("CARGO_MANIFEST_DIR")
+    let slice = mole()
         .args([
             "eval",
             "--family",
@@ -244,11 +249,8 @@ fn ctrl_c_ends_the_suite_and_leaves_out_the_runs_it_cut_short() {
     let before = shm_files();
     let dir = TempDir::new("eval-int");
     let json = dir.0.join("report.json");
-    let mut command = Command::new(bin_dir().join("mole"));
+    let mut command = mole();
     command
-        .current_dir(workspace())
-        .env_remove("CARGO")
-        .env_remove("CARGO_MANIFEST_DIR")
         .args([
             "eval",
             "--family",
@@ -313,11 +315,8 @@ fn a_slice_of_the_stored_baselines_does_no_worse_than_they_do() {
             .iter()
             .find(|s| s.file() == *file)
             .unwrap_or_else(|| panic!("{file} is not a stored suite"));
-        let mut command = Command::new(bin_dir().join("mole"));
+        let mut command = mole();
         command
-            .current_dir(workspace())
-            .env_remove("CARGO")
-            .env_remove("CARGO_MANIFEST_DIR")
             .args(["eval", "--family", &suite.family])
             .args(["--planner", &suite.planner.to_string()])
             .args([
