@@ -520,7 +520,12 @@ impl Process {
             }
             follow_map(&self.ctx, &mut self.map, &mut init, &mut state)?;
             let Some(state) = state.as_mut() else {
-                self.discard_inputs();
+                // Before the map, realtime readings are stale; lockstep ones are steps owed to
+                // this process (a restart's, handed from history before the world's map came),
+                // so they stay queued: discarded, the restart skipped a step (the grid differed).
+                if self.ctx.mode() == ClockMode::Realtime {
+                    self.discard_inputs();
+                }
                 continue;
             };
             // Every due step, in order: a process beside the loop may have fallen behind.
@@ -538,6 +543,21 @@ impl Process {
                     Due::Step => {}
                     Due::Skip => continue,
                     Due::NotYet => break,
+                }
+                if self.ctx.mode() == ClockMode::Lockstep
+                    && order == Order::EveryTick
+                    && let Some(h) = handled
+                    && k > h + 1
+                {
+                    // Every step of a process beside the loop is owed to it: a gap changes
+                    // its output (a map built without a scan) and must not pass silently.
+                    tracing::warn!(
+                        tick = k,
+                        after = h,
+                        "lockstep: steps {} to {} were never handed to this process",
+                        h + 1,
+                        k - 1
+                    );
                 }
                 let origin_ns = self.ports[trigger].origin_ns();
                 step(
