@@ -57,11 +57,16 @@ fn run(victims: &[Role]) -> Run {
         signal(pid, nix::sys::signal::Signal::SIGKILL);
         stack.wait_for_log(role.name(), "--- mole: restart 1", Duration::from_secs(60));
     }
+    finish(stack, victims.last().copied())
+}
+
+/// Waits for `stack`'s run to end and collects it: its summary, every role's log and the log of
+/// `victim`, the role killed last. The run must end well.
+fn finish(stack: Stack, victim: Option<Role>) -> Run {
     let keep = stack.out.with_extension("kept");
     let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
     let (logs, summary) = (logs(&keep), summary(&keep));
-    let victim_log = victims
-        .last()
+    let victim_log = victim
         .map(|role| {
             std::fs::read_to_string(keep.join("logs").join(format!("{}.log", role.name())))
                 .unwrap_or_default()
@@ -278,16 +283,14 @@ fn a_restart_whose_map_comes_late_loses_no_step() {
     stack.wait_for_log(Role::Mapping.name(), resumed, Duration::from_secs(30));
     std::thread::sleep(Duration::from_millis(800));
     signal(world, Signal::SIGCONT);
-    let keep = stack.out.with_extension("kept");
-    let output = stack.wait_and_copy(&keep, RUN_TIMEOUT);
-    let (logs, summary) = (logs(&keep), summary(&keep));
-    let mapping_log = std::fs::read_to_string(keep.join("logs/mapping.log")).unwrap_or_default();
-    let _ = std::fs::remove_dir_all(&keep);
-    assert!(output.status.success(), "{logs}");
+    let Run {
+        summary,
+        victim_log: mapping_log,
+        logs,
+    } = finish(stack, Some(Role::Mapping));
     assert!(
         !mapping_log.contains("were never handed"),
-        "mapping lost a step:\n{}",
-        without_colours(&mapping_log)
+        "mapping lost a step:\n{mapping_log}"
     );
     let differ = differing_fields(&comparable(&summary), &comparable(unkilled()));
     assert!(
