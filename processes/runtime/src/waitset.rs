@@ -184,7 +184,13 @@ impl WaitSet {
                 }
                 return Ok(Wake::Timeout);
             }
-            let timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));
+            let mut timeout = until_deadline.map_or(until_stats, |d| d.min(until_stats));
+            if ctx.mode() == ClockMode::Lockstep {
+                // Idle slices end every LOCKSTEP_RECHECK with an offer of history, however
+                // far the deadline: the world waits a second for a reply, and a swapped-in
+                // planner that has not yet been handed the map cannot give it one.
+                timeout = timeout.min(LOCKSTEP_RECHECK);
+            }
             let timeout =
                 PollTimeout::try_from(timeout.as_millis().max(1)).unwrap_or(PollTimeout::MAX);
             let woke = match nix::poll::poll(&mut self.sockets.borrow_mut(), timeout) {
@@ -202,15 +208,16 @@ impl WaitSet {
             // No signal: reset a stuck "notified" state (see `take_all`), and if a sample came
             // without its signal, wake up for it now.
             self.take_all();
+            // Idle as on the deadline: a subscriber that joined late may wait for our history
+            // (a sample left queued must not starve the offer either).
+            if ctx.mode() == ClockMode::Lockstep {
+                ctx.offer_history();
+            }
             if self.probes.borrow().iter().any(|p| p.has_data()) {
                 if !self.missed_signal.replace(true) {
                     tracing::warn!(
                         "a sample came without its wake-up signal; found by looking (warned once)"
                     );
-                }
-                // Idle as on the deadline: a sample left queued must not starve the offer.
-                if ctx.mode() == ClockMode::Lockstep {
-                    ctx.offer_history();
                 }
                 return Ok(Wake::Data);
             }
