@@ -159,7 +159,8 @@ fn a_suite_runs_reports_repeats_and_checks_against_a_baseline() {
 }
 
 /// An unknown family, no worlds, a bad swap, a baseline that is not a report or is another
-/// family's, a `--beside` that is not a report, `--baselines` with a suite's own options:
+/// family's, a `--beside` that is not a report, `--baselines` with a suite's own options or a
+/// family that has no suite:
 /// exit 2, one line naming what was wrong, and no world written.
 #[test]
 fn bad_eval_input_is_refused_before_any_world_runs() {
@@ -218,8 +219,12 @@ fn bad_eval_input_is_refused_before_any_world_runs() {
             "--beside",
         ),
         (
-            vec!["eval", "--baselines", "b", "--family", "maze"],
+            vec!["eval", "--baselines", "b", "--planner", "dwa"],
             "cannot be used with",
+        ),
+        (
+            vec!["eval", "--baselines", "b", "--family", "mazes"],
+            "--family mazes: no stored suite is of that family",
         ),
     ] {
         let out = dir.0.join("out");

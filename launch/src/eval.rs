@@ -89,11 +89,11 @@ pub struct EvalArgs {
     pub beside: Vec<PathBuf>,
     /// Run every stored suite (every planner on every family, every estimator on its
     /// families) and write their reports and plots under DIR, as `eval/baselines/` holds them
-    /// (`scripts/eval-baselines.sh`).
+    /// (`scripts/eval-baselines.sh`); with `--family`, only that family's suites.
     #[arg(
         long,
         value_name = "DIR",
-        conflicts_with_all = ["family", "planner", "estimator", "local_planner", "task", "swaps", "ticks", "json", "check", "plot"]
+        conflicts_with_all = ["planner", "estimator", "local_planner", "task", "swaps", "ticks", "json", "check", "plot"]
     )]
     pub baselines: Option<PathBuf>,
 }
@@ -291,7 +291,16 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
 /// Every stored suite, one after the other, each report to `dir/FILE` and each family's suites
 /// drawn side by side; the suites that fail are named at the end and the rest still run.
 fn run_baselines(args: &EvalArgs, dir: &Path) -> Result<(), Failure> {
-    let suites = baselines::suites();
+    let suites: Vec<_> = baselines::suites()
+        .into_iter()
+        .filter(|suite| args.family.as_ref().is_none_or(|f| *f == suite.family))
+        .collect();
+    if suites.is_empty() {
+        return Err(Failure::input(format!(
+            "--family {}: no stored suite is of that family",
+            args.family.as_deref().unwrap_or_default()
+        )));
+    }
     let mut problems = Vec::new();
     for (i, suite) in suites.iter().enumerate() {
         if INTERRUPTED.load(Ordering::SeqCst) {
@@ -319,7 +328,10 @@ fn run_baselines(args: &EvalArgs, dir: &Path) -> Result<(), Failure> {
         }
     }
     let mut plots: BTreeMap<String, Vec<EvalReport>> = BTreeMap::new();
-    for suite in &suites {
+    for suite in baselines::suites()
+        .iter()
+        .filter(|s| suites.iter().any(|ran| ran.plot() == s.plot()))
+    {
         if let Ok(report) = read_report("--baselines", &dir.join(suite.file())) {
             plots.entry(suite.plot()).or_default().push(report);
         }

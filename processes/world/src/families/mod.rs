@@ -15,8 +15,9 @@
 //!
 //! Every world is bounded by the arena walls, built from axis-aligned squares only, holds a start,
 //! a goal and beacons, and passes [`generate`]'s checks: the start disk is free, the goal is
-//! reachable for the robot's radius on the inflated raster ([`FreeSpace`]), and the reachable part
-//! covers at least [`WorldSpec::min_coverage`] of the free space. A draw that fails them is drawn
+//! reachable for the robot's radius on the inflated raster ([`FreeSpace`]), and for the radius
+//! plus [`WorldSpec::clearance`] too, and the reachable part covers at least
+//! [`WorldSpec::min_coverage`] of the free space. A draw that fails them is drawn
 //! again from a derived stream (`set_stream(attempt)`), at most [`MAX_ATTEMPTS`] times. The
 //! beacons then stand near walls where they bring the most of the reachable space into sight
 //! (greedy maximum coverage), and the scenario is returned only once its file reads back as it.
@@ -136,6 +137,11 @@ pub struct WorldSpec {
     pub grid_resolution: f64,
     /// The smallest fraction of the free configuration space the start must reach, in [0, 1].
     pub min_coverage: f64,
+    /// Room (m) to spare on each side of the robot along some path from the start to the goal:
+    /// the goal must be reachable for the radius plus this. A gap the robot passes with
+    /// millimetres to spare is below what the grid (0.05 m cells) and any safety margin can
+    /// resolve, so a world that needs one tests nothing but luck.
+    pub clearance: f64,
     /// Parameters of [`Family::Maze`].
     pub maze: MazeParams,
     /// Parameters of [`Family::Rooms`].
@@ -158,6 +164,7 @@ impl WorldSpec {
             beacons: 8,
             grid_resolution: 0.05,
             min_coverage: 0.5,
+            clearance: 0.1,
             maze: MazeParams::default(),
             rooms: RoomsParams::default(),
             clutter: ClutterParams::default(),
@@ -211,7 +218,7 @@ impl WorldSpec {
         format!(
             "{family}, robot.radius = {:?}, robot.max_speed = {:?}, robot.max_omega = {:?}, \
              robot.max_accel = {:?}, robot.max_alpha = {:?}, beacons = {}, grid_resolution = {:?}, \
-             min_coverage = {:?}, dark = {}",
+             min_coverage = {:?}, clearance = {:?}, dark = {}",
             r.radius,
             r.max_speed,
             r.max_omega,
@@ -220,6 +227,7 @@ impl WorldSpec {
             self.beacons,
             self.grid_resolution,
             self.min_coverage,
+            self.clearance,
             self.dark
         )
     }
@@ -245,6 +253,13 @@ impl WorldSpec {
                 "min_coverage",
                 "a fraction in [0, 1]",
                 self.min_coverage,
+            ));
+        }
+        if !(self.clearance.is_finite() && self.clearance >= 0.0) {
+            return Err(Bad::new(
+                "clearance",
+                "a distance (m) of 0 or more",
+                self.clearance,
             ));
         }
         let res = self.grid_resolution;
@@ -330,7 +345,7 @@ pub fn generate(spec: &WorldSpec, seed: u64) -> Result<Scenario, GenerateError> 
             }
         };
         let mut scenario = scenario_of(spec, seed, layout);
-        let space = match check_solvable(&scenario, spec.min_coverage) {
+        let space = match check_solvable(&scenario, spec.min_coverage, spec.clearance) {
             Ok(space) => space,
             Err(why) => {
                 reason = why;
@@ -403,9 +418,10 @@ fn scenario_of(spec: &WorldSpec, seed: u64, layout: Layout) -> Scenario {
 }
 
 /// The solvability checks: the start and goal disks free, the goal reachable from the start for
-/// the robot's radius on the inflated raster, and the reachable cells at least `min_coverage` of
-/// the free ones (no large pocket the start cannot reach). Returns the free space.
-fn check_solvable(s: &Scenario, min_coverage: f64) -> Result<FreeSpace, String> {
+/// the robot's radius on the inflated raster, and for the radius plus `clearance`, and the
+/// reachable cells at least `min_coverage` of the free ones (no large pocket the start cannot
+/// reach). Returns the free space of the radius itself.
+fn check_solvable(s: &Scenario, min_coverage: f64, clearance: f64) -> Result<FreeSpace, String> {
     if s.obstacles.len() > MAX_OBSTACLES {
         return Err(format!(
             "{} obstacles, more than {MAX_OBSTACLES}",
@@ -443,6 +459,17 @@ fn check_solvable(s: &Scenario, min_coverage: f64) -> Result<FreeSpace, String> 
             "the start reaches {:.1}% of the free space, less than min_coverage = {min_coverage}",
             100.0 * coverage
         ));
+    }
+    if clearance > 0.0 {
+        let mut wider = s.clone();
+        wider.robot.radius = r + clearance;
+        if !FreeSpace::new(&wider).goal_reachable(&goal) {
+            return Err(format!(
+                "the goal ({}, {}) is not reachable from the start with clearance = {clearance} m \
+                 to spare each side of radius {r} m",
+                goal.x, goal.y
+            ));
+        }
     }
     Ok(space)
 }

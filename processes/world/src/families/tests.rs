@@ -78,11 +78,11 @@ fn the_same_seed_gives_the_same_world_and_another_seed_another() {
 #[test]
 fn seed_42_gives_the_recorded_worlds() {
     let recorded: [(Family, u64); 5] = [
-        (Family::Maze, 12_399_689_223_464_311_018),
-        (Family::Rooms, 813_808_418_560_045_948),
-        (Family::Clutter, 9_820_807_932_586_508_881),
-        (Family::Cellular, 12_992_347_482_324_765_618),
-        (Family::Corridors, 16_713_215_309_589_649_429),
+        (Family::Maze, 8_528_958_222_465_149_881),
+        (Family::Rooms, 4_402_397_990_692_872_049),
+        (Family::Clutter, 12_853_751_607_979_125_964),
+        (Family::Cellular, 16_672_740_276_945_727_685),
+        (Family::Corridors, 2_772_096_909_061_111_462),
     ];
     let mut found = Vec::new();
     for (family, _) in recorded {
@@ -512,32 +512,52 @@ fn the_solvability_checks_refuse_what_they_guard() {
         Path::new("t.toml"),
     )
     .unwrap();
-    assert!(check_solvable(&open, 1.0).is_ok());
+    assert!(check_solvable(&open, 1.0, 0.0).is_ok());
     let mut s = open.clone();
     s.obstacles.push(Square::new(1.0, 1.3, 0.5));
-    assert!(check_solvable(&s, 0.0).unwrap_err().contains("start disk"));
+    assert!(
+        check_solvable(&s, 0.0, 0.0)
+            .unwrap_err()
+            .contains("start disk")
+    );
     let mut s = open.clone();
     s.obstacles.push(Square::new(8.0, 5.0, 0.5));
-    assert!(check_solvable(&s, 0.0).unwrap_err().contains("goal disk"));
+    assert!(
+        check_solvable(&s, 0.0, 0.0)
+            .unwrap_err()
+            .contains("goal disk")
+    );
     // A wall across the arena at x = 5: the goal beyond it, half the free space unreachable.
     let mut walled = open.clone();
     walled.obstacles = (0..10)
         .map(|k| Square::new(5.0, 0.5 + f64::from(k), 1.0))
         .collect();
-    let e = check_solvable(&walled, 0.0).unwrap_err();
+    let e = check_solvable(&walled, 0.0, 0.0).unwrap_err();
     assert!(e.contains("not reachable"), "{e}");
     walled.goal = Some(Goal {
         x: 2.0,
         y: 8.0,
         tolerance: GOAL_TOLERANCE,
     });
-    assert!(check_solvable(&walled, 0.4).is_ok());
-    let e = check_solvable(&walled, 0.6).unwrap_err();
+    assert!(check_solvable(&walled, 0.4, 0.0).is_ok());
+    let e = check_solvable(&walled, 0.6, 0.0).unwrap_err();
     assert!(e.contains("less than min_coverage = 0.6"), "{e}");
+    // A wall across at x = 5 with one gap, 0.05 m wider than the robot, centred at y = 5:
+    // passable, but not with the clearance a family asks for.
+    let wide = 2.0 * open.robot.radius + 0.05;
+    let mut gap = open.clone();
+    gap.obstacles = (0..20)
+        .filter(|k| *k != 9 && *k != 10)
+        .map(|k| Square::new(5.0, 0.25 + 0.5 * f64::from(k), 0.5))
+        .chain([-1.0, 1.0].map(|side| Square::new(5.0, 5.0 + side * (wide / 2.0 + 0.25), 0.5)))
+        .collect();
+    assert!(check_solvable(&gap, 0.0, 0.0).is_ok());
+    let e = check_solvable(&gap, 0.0, 0.1).unwrap_err();
+    assert!(e.contains("clearance = 0.1"), "{e}");
     let mut crowded = open;
     crowded.obstacles = vec![Square::new(5.0, 5.0, 0.1); MAX_OBSTACLES + 1];
     assert!(
-        check_solvable(&crowded, 0.0)
+        check_solvable(&crowded, 0.0, 0.0)
             .unwrap_err()
             .contains("2049 obstacles")
     );
