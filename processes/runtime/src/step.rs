@@ -514,6 +514,9 @@ impl Process {
         let mut init = Some(init);
         let mut state = None;
         let mut handled = self.resume_after;
+        // The last step handled or knowingly skipped (`Due::Skip`, logged by the gate): a gap
+        // after it is a step lost.
+        let mut accounted = handled;
         loop {
             if waitset.wait(&mut self.ctx, None)? == Wake::Shutdown {
                 return Ok(());
@@ -541,12 +544,15 @@ impl Process {
                 }
                 match gate.due(k, trigger, &self.ports) {
                     Due::Step => {}
-                    Due::Skip => continue,
+                    Due::Skip => {
+                        accounted = Some(k);
+                        continue;
+                    }
                     Due::NotYet => break,
                 }
                 if self.ctx.mode() == ClockMode::Lockstep
                     && order == Order::EveryTick
-                    && let Some(h) = handled
+                    && let Some(h) = accounted
                     && k > h + 1
                 {
                     // Every step of a process beside the loop is owed to it: a gap changes
@@ -569,7 +575,7 @@ impl Process {
                         ports: &self.ports,
                     },
                 )?;
-                handled = Some(k);
+                (handled, accounted) = (Some(k), Some(k));
                 self.ctx.count_step();
             }
         }
