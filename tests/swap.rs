@@ -117,14 +117,7 @@ fn lockstep_swaps_lose_and_repeat_no_step_and_refusals_change_nothing() {
     };
     let (mapping_log, localization_log) =
         (log(Role::Mapping.name()), log(Role::Localization.name()));
-    // No step was lost, so no process may say one was never handed to it.
-    let gaps: Vec<String> = swappable
-        .iter()
-        .map(|row| log(row.role.name()))
-        .filter(|l| l.contains("were never handed"))
-        .collect();
     let _ = std::fs::remove_dir_all(&keep);
-    assert!(gaps.is_empty(), "a false gap warning:\n{}", gaps.join("\n"));
     assert!(took_over(&mapping_log, Role::Mapping), "{mapping_log}");
     assert!(
         took_over(&localization_log, Role::Localization),

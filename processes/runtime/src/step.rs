@@ -514,9 +514,6 @@ impl Process {
         let mut init = Some(init);
         let mut state = None;
         let mut handled = self.resume_after;
-        // The last step handled or knowingly skipped (`Due::Skip`, logged by the gate): a gap
-        // after it is a step lost.
-        let mut accounted = handled;
         loop {
             if waitset.wait(&mut self.ctx, None)? == Wake::Shutdown {
                 return Ok(());
@@ -544,15 +541,12 @@ impl Process {
                 }
                 match gate.due(k, trigger, &self.ports) {
                     Due::Step => {}
-                    Due::Skip => {
-                        accounted = Some(k);
-                        continue;
-                    }
+                    Due::Skip => continue,
                     Due::NotYet => break,
                 }
                 if self.ctx.mode() == ClockMode::Lockstep
                     && order == Order::EveryTick
-                    && let Some(h) = accounted
+                    && let Some(h) = handled
                     && k > h + 1
                 {
                     // Every step of a process beside the loop is owed to it: a gap changes
@@ -575,7 +569,7 @@ impl Process {
                         ports: &self.ports,
                     },
                 )?;
-                (handled, accounted) = (Some(k), Some(k));
+                handled = Some(k);
                 self.ctx.count_step();
             }
         }
