@@ -9,12 +9,15 @@ ticks="${1:-60000}"
 shift || true
 planners=("${@:-random-walk frontier}")
 read -r -a planners <<<"${planners[*]}"
+# The same build as scripts/eval-baselines.sh: `cargo run -p mole-launch` alone unifies other
+# features and relinks `mole`, under any eval running beside it.
+cargo build --quiet --release --workspace --bins
 echo "| planner | steps to 50 % | steps to 90 % | steps to 95 % | final coverage | path length (m) |"
 echo "| --- | ---: | ---: | ---: | ---: | ---: |"
 for p in "${planners[@]}"; do
     out="runs/compare/$p"
     mkdir -p "$out"
-    if ! cargo run --quiet --release -p mole-launch -- up --scenario scenarios/maze.toml \
+    if ! target/release/mole up --scenario scenarios/maze.toml \
         --mode lockstep --planner "$p" --ticks "$ticks" --out "$out" >"$out/run.log" 2>&1; then
         echo "| $p | run failed (see $out/run.log) | | | | |"
         continue

@@ -376,7 +376,7 @@ impl Planner for Apf {
         let (tick, dt) = (input.tick, input.dt);
         let p = [input.pose.x, input.pose.y];
         let d_goal = (p[0] - self.goal[0]).hypot(p[1] - self.goal[1]);
-        if d_goal <= self.config.goal_tolerance {
+        if crate::arrived(d_goal, self.config.goal_tolerance) {
             self.phase = ApfPhase::Reached;
         }
         if self.replan_asked {

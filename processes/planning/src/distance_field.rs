@@ -359,8 +359,9 @@ impl DistanceField {
     }
 
     /// Sets `out[i]` (resized to the grid's cells) to whether the centre of cell i is farther
-    /// than `keep` m from every occupied square: the inflation of the occupied cells by `keep`,
-    /// in one pass over the cells (squared distances, no division, `floor` or square root).
+    /// than `keep` m from every occupied square and from the grid's edges: the inflation of the
+    /// walls by `keep`, in one pass over the cells (squared distances, no division, `floor` or
+    /// square root).
     pub fn clear_of(&self, keep: f64, out: &mut Vec<bool>) {
         let (w, h) = (self.width, self.height);
         out.clear();
@@ -384,10 +385,23 @@ impl DistanceField {
                 *o = x0.is_infinite() || d2 > keep2;
             }
         }
+        // The grid's edges are the arena's walls (see `clearance_in_arena`): cells within
+        // `keep` of one are not clear.
+        let band = |n: usize| ((keep / res - 0.5).max(-1.0).floor() + 1.0).min(n as f64) as usize;
+        let (bx, by) = (band(w), band(h));
+        for row in 0..h {
+            let base = row * w;
+            if row < by || row >= h - by {
+                out[base..base + w].fill(false);
+            } else {
+                out[base..base + bx].fill(false);
+                out[base + w - bx..base + w].fill(false);
+            }
+        }
     }
 
-    /// Distance (m) from the centre of cell `idx` to the nearest occupied square (0 in one,
-    /// +∞ without any).
+    /// Distance (m) from the centre of cell `idx` to the nearest wall: an occupied square or
+    /// the grid's edge, the arena's wall (0 in a square, +∞ off the grid).
     #[inline]
     pub fn cell_clearance(&self, idx: usize) -> f64 {
         if idx >= self.width * self.height {
@@ -396,7 +410,30 @@ impl DistanceField {
         let res = self.resolution;
         let x = self.origin[0] + ((idx % self.width) as f64 + 0.5) * res;
         let y = self.origin[1] + ((idx / self.width) as f64 + 0.5) * res;
-        self.clearance(x, y).distance
+        self.clearance_in_arena(x, y).distance
+    }
+
+    /// [`DistanceField::clearance`] with the grid's edges as walls too: the grid covers the
+    /// arena, whose walls no scan maps as occupied cells (mapping's grids end at them).
+    pub fn clearance_in_arena(&self, x: f64, y: f64) -> Clearance {
+        let mut c = self.clearance(x, y);
+        let Some([x0, y0, x1, y1]) = self.extent() else {
+            return c;
+        };
+        for (d, away) in [
+            (x - x0, [1.0, 0.0]),
+            (x1 - x, [-1.0, 0.0]),
+            (y - y0, [0.0, 1.0]),
+            (y1 - y, [0.0, -1.0]),
+        ] {
+            if d < c.distance {
+                c = Clearance {
+                    distance: d.max(0.0),
+                    away: if d > 0.0 { away } else { [0.0, 0.0] },
+                };
+            }
+        }
+        c
     }
 }
 
@@ -458,6 +495,36 @@ mod tests {
         assert_eq!(f.clearance(0.5, 0.5).distance, f64::INFINITY);
     }
 
+    /// The planning queries see the grid's edges as the arena's walls; the plain clearance
+    /// (APF and the rollouts add the walls themselves) does not.
+    #[test]
+    fn the_grid_edges_are_walls_to_the_planning_queries() {
+        // 2 m × 1 m at 0.1 m, nothing occupied.
+        let mut f = DistanceField::new();
+        f.build_from_mask(20, 10, 0.1, [0.0, 0.0], &[0; 200]);
+        assert_eq!(f.clearance(0.02, 0.5).distance, f64::INFINITY);
+        assert!((f.cell_clearance(0) - 0.05).abs() < 1e-12);
+        assert!((f.cell_clearance(5 * 20 + 10) - 0.45).abs() < 1e-12);
+        let c = f.clearance_in_arena(0.02, 0.5);
+        assert!(
+            (c.distance - 0.02).abs() < 1e-12 && c.away == [1.0, 0.0],
+            "{c:?}"
+        );
+        let c = f.clearance_in_arena(1.9, 0.55);
+        assert!(
+            (c.distance - 0.1).abs() < 1e-12 && c.away == [-1.0, 0.0],
+            "{c:?}"
+        );
+        // Inflated by 0.3 m: three cells deep along every edge.
+        let mut clear = Vec::new();
+        f.clear_of(0.3, &mut clear);
+        for (i, c) in clear.iter().enumerate() {
+            let (col, row) = (i % 20, i / 20);
+            let inside = (3..17).contains(&col) && (3..7).contains(&row);
+            assert_eq!(*c, inside, "cell ({col}, {row})");
+        }
+    }
+
     proptest! {
         #[test]
         fn matches_brute_force_within_half_a_cell_diagonal(
@@ -494,7 +561,8 @@ mod tests {
             // At cell centres the nearest centre's square is within half a cell of the truth.
             for idx in 0..w * h {
                 let (cx, cy) = (((idx % w) as f64 + 0.5) * res, ((idx / w) as f64 + 0.5) * res);
-                let e = brute(w, h, res, &mask, cx, cy);
+                let edge = cx.min(cy).min(w as f64 * res - cx).min(h as f64 * res - cy);
+                let e = brute(w, h, res, &mask, cx, cy).min(edge);
                 let g = f.cell_clearance(idx);
                 prop_assert!((e.is_infinite() && g.is_infinite()) || (g >= e - 1e-9 && g <= e + 0.5 * res),
                     "cell {} got {} exact {}", idx, g, e);

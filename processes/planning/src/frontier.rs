@@ -788,7 +788,7 @@ mod tests {
     #[test]
     fn nearer_frontier_wins_at_equal_gain_and_walls_lengthen_paths() {
         let g = corridor();
-        // A thin inflation (0.03 m): the 0.3 m gap below is passable only for a thin one.
+        // A thin inflation (0.03 m): the 0.5 m gap below is passable only for a thin one.
         let thin = FrontierConfig {
             inflation_margin: 0.03,
             ..FrontierConfig::default()
@@ -802,14 +802,15 @@ mod tests {
         assert!((f.length - 0.95).abs() < 0.15, "{f:?}");
         // Path from the robot to the frontier, straight (line of sight).
         assert_eq!(s.path().len(), 2, "{:?}", s.path());
-        // Wall at x = 1.5 with a gap near the top: the left frontier's path goes around it and
-        // the right one becomes the cheaper.
+        // From x = 2.6 the left frontier is still the nearer (1.6 m against 2.4 m); a wall at
+        // x = 1.5 with a gap of 0.5 m at the top (against the arena's wall): the left
+        // frontier's path goes around it and the right one becomes the cheaper.
         let mut g = corridor();
-        for r in 0..17 {
+        for r in 0..15 {
             g.cells[r * 60 + 15] = CELL_OCCUPIED;
         }
         let f = s
-            .select(&g, [2.0, 0.5])
+            .select(&g, [2.6, 0.5])
             .unwrap_or_else(|| panic!("no frontier"));
         let left = s.candidates().iter().find(|c| c.x < 2.0).map(|c| c.length);
         assert!(left.is_some_and(|l| l > 2.5), "{:?}", s.candidates());

@@ -303,9 +303,12 @@ impl GlobalPath {
                 }
             }
             // Nothing even optimistically: the robot may sit inside the inflation (pressed to a
-            // wall); plan once more without it.
-            if attempt == 0 && field.cell_clearance(source) <= keep {
-                keep = 0.0;
+            // wall); plan once more with the inflation its own cell clears, so that the path
+            // leaves through gaps no narrower than where it stands (none at all would let it run
+            // through gaps it cannot pass).
+            let own = field.cell_clearance(source);
+            if attempt == 0 && own <= keep {
+                keep = (own - 1e-6).max(0.0);
             } else {
                 break;
             }
@@ -618,6 +621,56 @@ mod tests {
         assert!(!p.plan(&grid, &field, [1.0, 1.0], [3.0, 1.0], 0.25));
         assert!(p.is_empty());
     }
+
+    /// A start inside the inflation plans with the inflation its own cell clears, not none:
+    /// the path leaves by a gap at least as wide as where the robot stands. 4 m × 4 m at
+    /// 0.05 m; a wall at x = 2 m with a gap of 0.45 m (y ∈ [1, 1.45)) and one of 0.8 m
+    /// (y ∈ [2.6, 3.4)); the start 0.3 m from a post, the goal just across the narrow gap.
+    #[test]
+    fn a_start_inside_the_inflation_does_not_plan_through_a_gap_narrower_than_its_own() {
+        let mut grid = grid_free(80, 80, 0.05);
+        for r in (0..80).filter(|r| !(20..29).contains(r) && !(52..68).contains(r)) {
+            grid.cells[r * 80 + 40] = CELL_OCCUPIED;
+        }
+        // A post whose face is at x = 1.3 m beside the start (1.0, 1.2).
+        for r in 20..29 {
+            grid.cells[r * 80 + 26] = CELL_OCCUPIED;
+        }
+        let mut field = DistanceField::new();
+        field.update(&grid);
+        let keep = 0.37;
+        let start = [1.025, 1.225];
+        let own = field.cell_clearance(p_cell(&grid, start));
+        assert!(own < keep && own > 0.225, "{own}");
+        let mut p = GlobalPath::new();
+        assert!(p.plan(&grid, &field, start, [3.0, 1.225], keep));
+        assert!(
+            (p.inflation() - own).abs() < 1e-5,
+            "inflation {}, own {own}",
+            p.inflation()
+        );
+        let crosses = |lo: f64, hi: f64| {
+            p.points().windows(2).any(|s| {
+                let t = (2.025 - s[0][0]) / (s[1][0] - s[0][0]);
+                let y = s[0][1] + t * (s[1][1] - s[0][1]);
+                (0.0..=1.0).contains(&t) && (lo..hi).contains(&y)
+            })
+        };
+        assert!(
+            crosses(2.6, 3.4) && !crosses(1.0, 1.45),
+            "not through the wide gap alone: {:?}",
+            p.points()
+        );
+    }
+
+    fn p_cell(grid: &Grid, q: [f64; 2]) -> usize {
+        let (c, r) = (
+            ((q[0] - grid.origin_x) / grid.resolution) as usize,
+            ((q[1] - grid.origin_y) / grid.resolution) as usize,
+        );
+        r * grid.width as usize + c
+    }
+
     /// Whether the segment between two points (cell units) stays in cells `ok` accepts,
     /// sampled every 1/200 cell: an independent check of [`segment_cells`].
     fn sampled_clear(a: [f64; 2], b: [f64; 2], w: usize, ok: impl Fn(usize) -> bool) -> bool {

@@ -245,6 +245,18 @@ impl<P: Planner + ?Sized> Planner for Box<P> {
     }
 }
 
+/// How much closer (m) than the goal tolerance a goal seeker's estimate must come before it
+/// reports `MODE_ARRIVED` (at most half the tolerance): the world judges the true pose, and an
+/// estimate a few millimetres off on the tolerance's edge ended runs the world did not count as
+/// reached.
+pub const ARRIVAL_MARGIN: f64 = 0.05;
+
+/// Whether a goal seeker `distance` m from its goal (by its pose estimate) has arrived, for the
+/// world's `tolerance` (see [`ARRIVAL_MARGIN`]).
+pub(crate) fn arrived(distance: f64, tolerance: f64) -> bool {
+    distance <= tolerance - ARRIVAL_MARGIN.min(0.5 * tolerance)
+}
+
 /// Whether a step can be planned at all: a finite pose and a positive, finite Δt.
 pub(crate) fn usable(input: &PlannerInput) -> bool {
     input.pose.x.is_finite()
@@ -354,9 +366,9 @@ pub struct PlannerConfig {
     pub kind: PlannerKind,
     /// Goal (world, m): required by `apf` and `dwa`.
     pub goal: Option<(f64, f64)>,
-    /// The goal counts as reached (`MODE_ARRIVED`) within this distance (m): the world's own
-    /// tolerance (`WorldMap::goal_tolerance`), so that planner and world agree. `None` keeps
-    /// the APF's and DWA's default.
+    /// The goal counts as reached within this distance (m): the world's own tolerance
+    /// (`WorldMap::goal_tolerance`), so that planner and world agree (the planner reports
+    /// `MODE_ARRIVED` [`ARRIVAL_MARGIN`] inside it). `None` keeps the APF's and DWA's default.
     pub goal_tolerance: Option<f64>,
     /// Local planner of `frontier`.
     pub local: LocalPlanner,

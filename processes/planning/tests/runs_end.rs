@@ -125,7 +125,7 @@ fn frontier_exploration_finishes_unseen_mazes() {
     }
 }
 
-/// The shipped scenarios at seed 1: the `dwa` stack reports `MODE_ARRIVED` with the world's own
+/// The shipped scenarios at seed 1: the `dwa` stack reports `MODE_ARRIVED` inside the world's own
 /// goal tolerance, and the world agrees the goal is reached; frontier exploration of maze.toml
 /// reports `MODE_DONE` with at least 99 % seen. Neither touches anything.
 #[test]
@@ -149,9 +149,16 @@ fn shipped_scenarios_end_on_the_planners_word() {
         "not arrived in {} steps",
         o.steps
     );
-    // Estimate = truth here: the planner arrives on the pose the world just found within the
-    // same tolerance.
-    assert_eq!(o.goal_at, Some(o.steps - 2), "the world disagrees: {o:?}");
+    // Estimate = truth here: the world found the robot within its tolerance before the planner
+    // (which waits for `ARRIVAL_MARGIN` more) reports arriving, and not long before.
+    let early = o.steps
+        - 2
+        - o.goal_at
+            .unwrap_or_else(|| panic!("the world disagrees: {o:?}"));
+    assert!(
+        early > 0 && early < 100,
+        "arrived {early} steps after the world saw it: {o:?}"
+    );
     assert_eq!(o.contact_steps, 0);
 
     let sc = sim::scenario("maze.toml", 1);
