@@ -121,7 +121,7 @@ fn check_known_ids_map(s: &Summary) -> &SlamSummary {
 }
 
 /// EKF-SLAM maps every beacon of the ring, each once (known ids: no association error), with a
-/// landmark RMSE below [`LANDMARK_RMSE`]. Measured at seed 1: 0.0089 m over 5,130 steps.
+/// landmark RMSE below [`LANDMARK_RMSE`]. Measured at seed 1: 0.024 m over 4,176 steps.
 #[test]
 fn ekf_slam_maps_the_ring_within_a_decimetre() {
     let s = run_on_the_ring("slam_ekf", EstimatorKind::EkfSlam, Path::new(RING));
@@ -129,7 +129,7 @@ fn ekf_slam_maps_the_ring_within_a_decimetre() {
 }
 
 /// FastSLAM maps every beacon of the ring, each once, with a landmark RMSE below
-/// [`LANDMARK_RMSE`]. Measured at seed 1: 0.0083 m over 5,122 steps.
+/// [`LANDMARK_RMSE`]. Measured at seed 1: 0.039 m over 4,182 steps.
 #[test]
 fn fastslam_maps_the_ring_within_a_decimetre() {
     let s = run_on_the_ring("slam_fast", EstimatorKind::FastSlam, Path::new(RING));
@@ -141,16 +141,27 @@ fn fastslam_maps_the_ring_within_a_decimetre() {
 const SMOOTHER_SEEDS: [&str; 6] = ["1", "2", "3", "4", "5", "6"];
 
 /// GraphSLAM maps every beacon of the ring, each once, with a landmark RMSE below
-/// [`LANDMARK_RMSE`] (measured at seed 1: 0.011 m), and its smoothed trajectory
-/// (`localization/trajectory`, most of the run's ticks) is closer to the truth than its
-/// front-end filter's poses over the same ticks, on the mean over [`SMOOTHER_SEEDS`]: after the
-/// loop closes, the smoother corrects the whole past, which a filter never revisits. On no seed
-/// is it more than 5% worse. Measured (the same on every run: which steps the smoother solves
-/// after depends on the step count only): mean 0.0188 m smoothed against the filter's 0.0197 m;
-/// per seed 0.0085/0.0083, 0.0246/0.0247, 0.0049/0.0054, 0.0461/0.0476, 0.0174/0.0170,
-/// 0.0114/0.0155 m.
+/// [`LANDMARK_RMSE`] (measured at seed 1: 0.024 m), and its smoothed trajectory
+/// (`localization/trajectory`, most of the run's ticks) is, in shape, as close to the truth as
+/// its front-end filter's poses over the same ticks: its absolute trajectory error (the RMSE
+/// after the best rigid alignment, `slam.smoothed_ate_m`) is below the filter's on the mean over
+/// [`SMOOTHER_SEEDS`], and on no seed more than 5% above it.
+///
+/// Why the shape and not the raw RMSE: the raw error of both is mostly a rotation of the whole
+/// estimate (1–16 mrad here) left by the start's prior and the odometry before the first
+/// beacons, which no later reading observes; which of the two it favours is a coin toss per
+/// seed (seed 5: raw 0.0103 m smoothed against 0.0082 m, aligned 0.0028 against 0.0029 m).
+/// Why only "as close": frontier exploration ends once the lidar has seen the last frontier,
+/// and the trajectory scored (up to the smoother's last solve before the end) comes no closer
+/// than 1.9–2.2 m to the beacons seen from the start, 1.5 m being their range: no loop closes
+/// in it, and with a beacon always in sight the filter's poses are nearly as good as the
+/// smoother's. What smoothing gains after a loop closes is measured without IPC
+/// (`processes/localization/tests/graph_slam.rs`). Measured (the same on every run: which steps
+/// the smoother solves after depends on the step count only), aligned, smoothed/filter (m):
+/// 0.0072/0.0072, 0.0065/0.0069, 0.0036/0.0039, 0.0127/0.0122, 0.0028/0.0029, 0.0035/0.0038;
+/// mean 0.0060 against 0.0061.
 #[test]
-fn graph_slam_smooths_the_ring_better_than_its_filter() {
+fn graph_slam_smooths_the_ring_as_closely_as_its_filter() {
     let (mut smoothed_sum, mut filter_sum) = (0.0, 0.0);
     for seed in SMOOTHER_SEEDS {
         let s = run_on_the_ring_with_seed(
@@ -169,32 +180,36 @@ fn graph_slam_smooths_the_ring_better_than_its_filter() {
             "seed {seed}: a trajectory over most of the {} steps\n{slam:#?}",
             s.ticks
         );
-        let smoothed = slam.smoothed_rmse_m.expect("a smoothed trajectory scored");
-        let filter = slam.filter_rmse_same_ticks_m.expect("the filter scored");
-        println!("seed {seed}: smoothed RMSE {smoothed:.4} m, filter {filter:.4} m");
+        let smoothed = slam.smoothed_ate_m.expect("a smoothed trajectory scored");
+        let filter = slam.filter_ate_same_ticks_m.expect("the filter scored");
+        println!(
+            "seed {seed}: smoothed ATE {smoothed:.4} m, filter {filter:.4} m (raw RMSE {:?} m, \
+             {:?} m)",
+            slam.smoothed_rmse_m, slam.filter_rmse_same_ticks_m
+        );
         assert!(
             smoothed <= 1.05 * filter,
-            "seed {seed}: smoothed RMSE {smoothed} m, more than 5% above the filter's {filter} m"
+            "seed {seed}: smoothed ATE {smoothed} m, more than 5% above the filter's {filter} m"
         );
         smoothed_sum += smoothed;
         filter_sum += filter;
     }
     let n = SMOOTHER_SEEDS.len() as f64;
     let (smoothed, filter) = (smoothed_sum / n, filter_sum / n);
-    println!("mean over {n} seeds: smoothed RMSE {smoothed:.4} m, filter {filter:.4} m");
+    println!("mean over {n} seeds: smoothed ATE {smoothed:.4} m, filter {filter:.4} m");
     assert!(
         smoothed < filter,
-        "mean smoothed RMSE {smoothed} m ≥ mean filter RMSE {filter} m"
+        "mean smoothed ATE {smoothed} m ≥ mean filter ATE {filter} m"
     );
 }
 
 /// Highest association error rate accepted on the anonymous ring: a quarter of the landmarks
-/// duplicates. Measured at seed 1: EKF-SLAM 3 of 27 (0.111), FastSLAM 3 of 27 (0.111); an
+/// duplicates. Measured at seed 1: EKF-SLAM 0 of 24, FastSLAM 1 of 25 (0.04); an
 /// association that founds a landmark for every reading it cannot match with certainty, or
 /// merges neighbours, goes far beyond.
 const ANONYMOUS_ERROR_RATE: f64 = 0.25;
 /// Highest landmark RMSE accepted on the anonymous ring (m), the known-ids bound. Measured at
-/// seed 1: EKF-SLAM 0.041 m, FastSLAM 0.026 m, duplicates included.
+/// seed 1: EKF-SLAM 0.021 m, FastSLAM 0.051 m, duplicates included.
 const ANONYMOUS_LANDMARK_RMSE: f64 = LANDMARK_RMSE;
 
 /// An anonymous-ring map: at least 20 of the 24 beacons mapped, the association error rate
@@ -220,8 +235,8 @@ fn check_anonymous_map(s: &Summary) {
 }
 
 /// With the beacon ids hidden, EKF-SLAM associates every reading itself (maximum likelihood
-/// behind a χ² gate) and still maps the ring: measured at seed 1, all 24 beacons with 3
-/// duplicates in 5,101 steps.
+/// behind a χ² gate) and still maps the ring: measured at seed 1, all 24 beacons with no
+/// duplicate in 4,183 steps.
 #[test]
 fn ekf_slam_maps_the_anonymous_ring() {
     let ring = anonymous_ring("slam_ekf_anon");
@@ -233,7 +248,7 @@ fn ekf_slam_maps_the_anonymous_ring() {
 }
 
 /// With the beacon ids hidden, FastSLAM associates per particle and still maps the ring:
-/// measured at seed 1, all 24 beacons with 3 duplicates in 5,062 steps.
+/// measured at seed 1, all 24 beacons with 1 duplicate in 4,174 steps.
 #[test]
 fn fastslam_maps_the_anonymous_ring() {
     let ring = anonymous_ring("slam_fast_anon");

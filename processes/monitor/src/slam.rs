@@ -55,6 +55,14 @@ pub struct SlamSummary {
     /// The same for the filter's published poses (`localization/pose`) at the same ticks.
     #[serde(default)]
     pub filter_rmse_same_ticks_m: Option<f64>,
+    /// The smoothed poses' RMSE after the rotation and translation that bring them closest to
+    /// the truth (the absolute trajectory error): their shape, without the frame error that no
+    /// reading after the start can observe.
+    #[serde(default)]
+    pub smoothed_ate_m: Option<f64>,
+    /// The same for the filter's poses at the same ticks, aligned on their own.
+    #[serde(default)]
+    pub filter_ate_same_ticks_m: Option<f64>,
 }
 
 /// The last landmark map received, kept in storage sized once.

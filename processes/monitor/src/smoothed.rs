@@ -8,6 +8,12 @@
 //! filter's pose in the ring adds its squared position error, and the filter's pose of that tick
 //! adds its own, so the two RMSEs cover exactly the same ticks. A pose whose tick left the ring
 //! or lacks either (a dropped message) is not scored; the sample count says how many were.
+//!
+//! Each is also scored after the rigid motion that brings it closest to the truth is taken out
+//! (the absolute trajectory error of Sturm et al. 2012, "A benchmark for the evaluation of RGB-D
+//! SLAM systems"): a SLAM estimate's frame is only as good as the start's prior and the
+//! odometry before the first landmarks, and a rotation of a few milliradians of the whole
+//! estimate, which no later reading can observe, can outweigh everything smoothing corrects.
 
 use crate::slam::SlamSummary;
 use mole_types::{MAX_TRAJECTORY_POSES, Trajectory};
@@ -31,6 +37,58 @@ struct Score {
     samples: u32,
     smoothed_squared: f64,
     filter_squared: f64,
+    smoothed_aligned: RigidAlignment,
+    filter_aligned: RigidAlignment,
+}
+
+/// The sums that give, in closed form, the least squared error of estimated positions against
+/// true ones over every rotation and translation of the estimate (Umeyama 1991 without scale, in
+/// 2D): with both sets centred, `a = Σ ê·t̂` and `b = Σ ê×t̂`, the best rotation is atan2(b, a)
+/// and the error left is `Σ|ê|² + Σ|t̂|² − 2·√(a² + b²)`. Positions are taken relative to the
+/// first truth, so the sums stay small on any arena.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct RigidAlignment {
+    origin: Option<[f64; 2]>,
+    n: f64,
+    sum_e: [f64; 2],
+    sum_t: [f64; 2],
+    dot: f64,
+    cross: f64,
+    squared_e: f64,
+    squared_t: f64,
+}
+
+impl RigidAlignment {
+    /// Adds one estimated position and its truth.
+    pub fn add(&mut self, estimate: [f64; 2], truth: [f64; 2]) {
+        let o = *self.origin.get_or_insert(truth);
+        let e = [estimate[0] - o[0], estimate[1] - o[1]];
+        let t = [truth[0] - o[0], truth[1] - o[1]];
+        self.n += 1.0;
+        for i in 0..2 {
+            self.sum_e[i] += e[i];
+            self.sum_t[i] += t[i];
+        }
+        self.dot += e[0] * t[0] + e[1] * t[1];
+        self.cross += e[0] * t[1] - e[1] * t[0];
+        self.squared_e += e[0] * e[0] + e[1] * e[1];
+        self.squared_t += t[0] * t[0] + t[1] * t[1];
+    }
+
+    /// √(mean squared error) after the best rigid motion (`None` before two positions).
+    pub fn rmse(&self) -> Option<f64> {
+        if self.n < 2.0 {
+            return None;
+        }
+        let n = self.n;
+        let (me, mt) = (self.sum_e, self.sum_t);
+        let a = self.dot - (me[0] * mt[0] + me[1] * mt[1]) / n;
+        let b = self.cross - (me[0] * mt[1] - me[1] * mt[0]) / n;
+        let see = self.squared_e - (me[0] * me[0] + me[1] * me[1]) / n;
+        let stt = self.squared_t - (mt[0] * mt[0] + mt[1] * mt[1]) / n;
+        let left = (see + stt - 2.0 * a.hypot(b)).max(0.0);
+        Some((left / n).sqrt()).filter(|v| v.is_finite())
+    }
 }
 
 /// The truth and filter ring, the newest smoothed trajectory and its score.
@@ -102,6 +160,8 @@ impl SmoothedTrajectory {
                 score.samples += 1;
                 score.smoothed_squared += s;
                 score.filter_squared += f;
+                score.smoothed_aligned.add(smoothed, truth);
+                score.filter_aligned.add(filter, truth);
             }
         }
         self.score = Some(score);
@@ -122,6 +182,8 @@ impl SmoothedTrajectory {
         out.smoothed_samples = score.samples;
         out.smoothed_rmse_m = rmse(score.smoothed_squared);
         out.filter_rmse_same_ticks_m = rmse(score.filter_squared);
+        out.smoothed_ate_m = score.smoothed_aligned.rmse();
+        out.filter_ate_same_ticks_m = score.filter_aligned.rmse();
     }
 
     /// The newest trajectory's positions, in tick order.
@@ -138,4 +200,108 @@ fn finite(x: f64, y: f64) -> Option<[f64; 2]> {
 /// Squared distance between two points.
 fn squared(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::RigidAlignment;
+
+    /// A figure of eight on a 7 m arena with a deterministic wobble of a few centimetres.
+    fn truth_and_wobble(k: usize) -> ([f64; 2], [f64; 2]) {
+        let s = k as f64 * 0.01;
+        let truth = [3.5 + 2.0 * s.sin(), 3.5 + 1.5 * (2.0 * s).sin()];
+        let wobble = [0.03 * (7.3 * s).sin(), 0.02 * (5.1 * s + 1.0).cos()];
+        (truth, wobble)
+    }
+
+    /// `estimate` turned by `phi` about the origin and moved by `shift`.
+    fn moved(p: [f64; 2], phi: f64, shift: [f64; 2]) -> [f64; 2] {
+        let (s, c) = phi.sin_cos();
+        [
+            c * p[0] - s * p[1] + shift[0],
+            s * p[0] + c * p[1] + shift[1],
+        ]
+    }
+
+    #[test]
+    fn a_turned_and_moved_copy_of_the_truth_has_no_error_left() {
+        let mut fit = RigidAlignment::default();
+        let mut raw = 0.0;
+        let n = 700;
+        for k in 0..n {
+            let (truth, _) = truth_and_wobble(k);
+            let estimate = moved(truth, 0.01, [0.05, -0.02]);
+            raw += (estimate[0] - truth[0]).powi(2) + (estimate[1] - truth[1]).powi(2);
+            fit.add(estimate, truth);
+        }
+        let raw = (raw / n as f64).sqrt();
+        assert!(raw > 0.02, "raw RMSE {raw}");
+        let ate = fit.rmse().unwrap();
+        assert!(ate < 1e-6, "aligned RMSE {ate}");
+    }
+
+    /// The closed form equals the least error found by searching every rotation (with the
+    /// best translation for each, which is the difference of the centroids).
+    #[test]
+    fn the_closed_form_is_the_least_error_over_every_rotation() {
+        let n = 500;
+        let pairs: Vec<([f64; 2], [f64; 2])> = (0..n)
+            .map(|k| {
+                let (truth, wobble) = truth_and_wobble(k);
+                let e = moved(
+                    [truth[0] + wobble[0], truth[1] + wobble[1]],
+                    -0.03,
+                    [0.2, 0.1],
+                );
+                (e, truth)
+            })
+            .collect();
+        let mut fit = RigidAlignment::default();
+        for &(e, t) in &pairs {
+            fit.add(e, t);
+        }
+        let rmse_at = |phi: f64| {
+            let turned: Vec<[f64; 2]> = pairs
+                .iter()
+                .map(|&(e, _)| moved(e, phi, [0.0; 2]))
+                .collect();
+            let centroid = |pts: &mut dyn Iterator<Item = [f64; 2]>| {
+                let (mut sx, mut sy) = (0.0, 0.0);
+                for p in pts {
+                    sx += p[0];
+                    sy += p[1];
+                }
+                [sx / n as f64, sy / n as f64]
+            };
+            let ce = centroid(&mut turned.iter().copied());
+            let ct = centroid(&mut pairs.iter().map(|&(_, t)| t));
+            let sum: f64 = turned
+                .iter()
+                .zip(&pairs)
+                .map(|(e, &(_, t))| {
+                    (e[0] - ce[0] + ct[0] - t[0]).powi(2) + (e[1] - ce[1] + ct[1] - t[1]).powi(2)
+                })
+                .sum();
+            (sum / n as f64).sqrt()
+        };
+        let best = (-2000..=2000)
+            .map(|i| rmse_at(f64::from(i) * 1e-4))
+            .fold(f64::INFINITY, f64::min);
+        let ate = fit.rmse().unwrap();
+        assert!(
+            (ate - best).abs() < 1e-6,
+            "closed form {ate}, search {best}"
+        );
+        assert!(ate > 0.01, "the wobble is left: {ate}");
+    }
+
+    #[test]
+    fn fewer_than_two_positions_have_no_alignment() {
+        let mut fit = RigidAlignment::default();
+        assert_eq!(fit.rmse(), None);
+        fit.add([1.0, 2.0], [1.5, 2.5]);
+        assert_eq!(fit.rmse(), None);
+        fit.add([2.0, 2.0], [2.5, 2.5]);
+        assert!(fit.rmse().unwrap() < 1e-9);
+    }
 }
