@@ -618,7 +618,7 @@ impl Monitor {
         } else {
             None
         };
-        self.progress.on_status(s.header.tick, target);
+        self.progress.on_status(s.header.tick, target, s.path());
         self.plan_path.clear();
         self.plan_path.extend_from_slice(s.path());
     }
