@@ -135,10 +135,12 @@ fn start(namespace: &str, launch: &Path, seed: &str, paused: bool) -> Stack {
     Stack::start_in(namespace, &args)
 }
 
-/// Steps the two held stacks in turns of one fusion period, A then B, until both runs ended.
-/// A turn is over when its planner has published the status of the turn's last step, which
-/// comes after localization published its map of that step: so each of A's rounds at step k
-/// fuses B's map of step k − period, and each of B's fuses A's of step k.
+/// Steps the two held stacks in turns of one fusion period until both runs ended, the robot
+/// that goes first swapping every period. A turn is over when its planner has published the
+/// status of the turn's last step, which comes after localization published its map of that
+/// step: so the robot that goes first fuses at step k its peer's map of step k − period, and
+/// the other the first's map of step k. With A always first, A fused only maps a period old,
+/// which its own 100 steps since had mostly made redundant (CI kept A's map in 7 of 8 pairs).
 fn step_in_turns(stacks: &[Stack; 2]) {
     let period: u32 = FUSE_EVERY.parse().expect("a number");
     let mut operators = stacks
@@ -146,8 +148,12 @@ fn step_in_turns(stacks: &[Stack; 2]) {
         .map(|s| Operator::join(s, ClockMode::Lockstep));
     let ended = |o: &Operator| o.truth.latest().is_some_and(Truth::is_end);
     let mut at = [0_u64; 2];
+    let mut turn = 0;
     while !operators.iter().all(ended) {
-        for (i, operator) in operators.iter_mut().enumerate() {
+        let order = if turn % 2 == 0 { [0, 1] } else { [1, 0] };
+        turn += 1;
+        for i in order {
+            let operator = &mut operators[i];
             if ended(operator) {
                 continue;
             }
@@ -188,31 +194,29 @@ fn finish(stack: Stack) -> Run {
 /// seed to seed. So each robot is scored over the [`SEED_PAIRS`] (each pair alone, then
 /// together):
 ///
-/// (a) each robot's landmark RMSE fused, averaged over the pairs, is no higher than its own
-///     alone over the same pairs: fusing the peer's map did not make its map worse;
-/// (b) each robot's fused mean landmark NEES, averaged over the pairs, is below the upper end
+/// (a) each robot's fused mean landmark NEES, averaged over the pairs, is below the upper end
 ///     of the 95% interval a consistent map's falls in over that many runs, χ²₂ᵣ(0.975)/R
 ///     (R runs; a run's mean NEES has variance at most that of one χ²(2) whatever the
 ///     correlation of its landmarks' errors, so this is the wide end; naive information-sum
 ///     fusion, which counts the other's information again at every round, put it at 2.2e19);
-/// (c) fusion happened: each robot had rounds with a new peer map and intersected the landmarks
-///     both had (fused, or kept where CI's optimum was its own estimate: the better robot may
-///     keep all of its own), and a robot's map changed in most pairs (in a pair whose robots
-///     each hold the smaller covariance by their own measure, both keep theirs: seeds 3 and 4,
-///     where B's map is over-confident, NEES 5.1).
+/// (b) fusion happened: each robot had rounds with a new peer map and intersected the landmarks
+///     both had (fused, or kept where CI's optimum was its own estimate), and a robot's map
+///     changed in most pairs.
 ///
-/// Measured: RMSE A 0.0142 m fused against 0.0161 m alone, B 0.0171 m against 0.0274 m; fused
-/// NEES A 1.10, B 1.48, against an upper end of 3.61; a map changed in 7 of the 8 pairs. (Left to run free, two runs gave A 0.0152 and 0.0158 m fused, above its
-/// alone run, and two others 0.0121 and 0.0124.) A single pair is no evidence either way:
-/// fused against alone, one robot's RMSE ranged from 0.045 against 0.031 m to 0.020 against
-/// 0.059 m. A peer map
-/// shifted by 0.1 m puts robot A's fused RMSE at 0.034 m; the peer's covariance taken at a
-/// quarter of what it is puts the fused NEES above 100.
+/// Measured: fused NEES A 1.59, B 1.72 (alone 1.61 and 2.07), against an upper end of 3.61; a
+/// map changed in 6 of the 8 pairs. The landmark RMSE is printed, not claimed: averaged over
+/// the pairs it was A 0.0231 m fused against 0.0218 m alone, B 0.0237 against 0.0237 m. Of the
+/// nine robot runs whose map fusion changed, four ended better and three worse; CI is
+/// consistent only when what it fuses is, and where one robot's map is over-confident (seeds 3
+/// and 4: B's NEES 4.3) the other takes in its error (A 0.0101 → 0.0237 m). With A always
+/// stepping first, A fused only maps a period old and kept its own in 7 of 8 pairs, so the
+/// turns alternate ([`step_in_turns`]). The peer's covariance taken at a quarter of what it is
+/// puts the fused NEES above 100.
 ///
-/// The claims over 50 seeded runs of the filter alone are in
-/// processes/localization/tests/slam_two_robots.rs.
+/// The claims over 50 seeded runs of the filter alone, where fusing lowers both robots' RMSE,
+/// are in processes/localization/tests/slam_two_robots.rs.
 #[test]
-fn two_robots_fusing_their_maps_by_ci_map_no_worse_than_alone_and_stay_consistent() {
+fn two_robots_fusing_their_maps_by_ci_stay_consistent() {
     let _serial = serial();
     let launch = LaunchDir::new();
     let stock = workspace().join("launch/stacks/lockstep.toml");
@@ -281,12 +285,6 @@ fn two_robots_fusing_their_maps_by_ci_map_no_worse_than_alone_and_stay_consisten
              NEES {:.3} fused (95% upper end {nees_upper:.3})",
             rmse_fused[r], rmse_alone[r], nees_fused[r]
         );
-        if rmse_fused[r] > rmse_alone[r] {
-            broken.push(format!(
-                "robot {robot}: landmark RMSE {} m fused above {} m alone",
-                rmse_fused[r], rmse_alone[r]
-            ));
-        }
         if nees_fused[r] >= nees_upper {
             broken.push(format!(
                 "robot {robot} fused: mean landmark NEES {} above {nees_upper}",
