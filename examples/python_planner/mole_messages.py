@@ -416,21 +416,22 @@ _check(Landmark, 56, 8, [0, 4, 8, 16, 24])
 
 
 class Landmarks(ctypes.Structure):
-    """`mole.Landmarks.v1`: 3624 bytes, alignment 8."""
+    """`mole.Landmarks.v2`: 3632 bytes, alignment 8."""
 
     _fields_ = [
         ("header", Header),
         ("n_landmarks", ctypes.c_uint32),
         ("estimator", ctypes.c_uint32),
+        ("nees_dof", ctypes.c_double),
         ("landmarks", Landmark * 64),
     ]
 
     @classmethod
     def type_name(cls) -> str:
-        return "mole.Landmarks.v1"
+        return "mole.Landmarks.v2"
 
 
-_check(Landmarks, 3624, 8, [0, 32, 36, 40])
+_check(Landmarks, 3632, 8, [0, 32, 36, 40, 48])
 
 
 class TrajectoryPose(ctypes.Structure):

@@ -91,7 +91,7 @@ pub fn all() -> Vec<TypeLayout> {
         layout!(Fix, type_name::<Fix>(); header, x, y, std, valid, _pad),
         layout!(Pose, type_name::<Pose>(); header, x, y, theta, covariance, odom, update_ns, estimator, _pad),
         layout!(Particles, type_name::<Particles>(); header, n_particles, _pad, particles),
-        layout!(Landmarks, type_name::<Landmarks>(); header, n_landmarks, estimator, landmarks),
+        layout!(Landmarks, type_name::<Landmarks>(); header, n_landmarks, estimator, nees_dof, landmarks),
         layout!(Trajectory, type_name::<Trajectory>(); header, first_tick, n_poses, estimator, poses),
         layout!(Grid, type_name::<Grid>();
             header, width, height, resolution, origin_x, origin_y, kind, _pad, cells),
@@ -494,7 +494,7 @@ const _: () = {
     assert!(size_of::<Pose>() == 168);
     assert!(size_of::<Particles>() == 40 + 16 * MAX_PARTICLES);
     assert!(size_of::<Landmark>() == 56);
-    assert!(size_of::<Landmarks>() == 40 + 56 * MAX_LANDMARKS);
+    assert!(size_of::<Landmarks>() == 48 + 56 * MAX_LANDMARKS);
     assert!(size_of::<TrajectoryPose>() == 16);
     assert!(size_of::<Trajectory>() == 48 + 16 * MAX_TRAJECTORY_POSES);
     assert!(size_of::<Grid>() == 72 + MAX_GRID_CELLS);

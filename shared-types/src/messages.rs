@@ -621,12 +621,16 @@ pub struct Landmark {
 /// `tick`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("mole.Landmarks.v1")]
+#[type_name("mole.Landmarks.v2")]
 pub struct Landmarks {
     pub header: Header,
     pub n_landmarks: u32,
     /// Which estimator: an [`crate::EstimatorKind`] code.
     pub estimator: u32,
+    /// The degrees of freedom of the map's mean landmark NEES under the estimator's own joint
+    /// covariance (Satterthwaite's, between 2 and 2·n: 2·n when the landmarks' errors are
+    /// independent, 2 when they are one error shared); 0 when the estimator does not say.
+    pub nees_dof: f64,
     pub landmarks: [Landmark; MAX_LANDMARKS],
 }
 
@@ -647,6 +651,10 @@ impl Message for Landmarks {
         within("n_landmarks", self.n_landmarks, MAX_LANDMARKS)?;
         if crate::EstimatorKind::from_code(self.estimator).is_none() {
             return Err(Invalid::UnknownCode("estimator"));
+        }
+        all_finite("nees_dof", &[self.nees_dof])?;
+        if self.nees_dof < 0.0 {
+            return Err(Invalid::OutOfRange("nees_dof"));
         }
         for l in self.landmarks() {
             all_finite("landmarks", &[l.x, l.y])?;

@@ -263,6 +263,54 @@ fn landmark_covariance_matches_linear_propagation() {
     );
 }
 
+/// Two beacons read once each from the anchored first pose share its error: the joint
+/// covariance of linear propagation has P₁₂ = A₁ Σ₀ A₂ᵀ, and the map's mean-NEES degrees of
+/// freedom the graph gives from the landmark block of H⁻¹ are those of that joint covariance.
+#[test]
+fn landmark_nees_dof_is_that_of_the_joint_covariance() {
+    let noise = default_noise();
+    let start = Pose2::new(1.0, -2.0, 0.4);
+    let capacity = GraphCapacity {
+        poses: 1,
+        landmarks: 2,
+        observations: 2,
+    };
+    // An uncertain anchor, so that the error the two share is not negligible.
+    let mut config = GraphSlamConfig::new(noise);
+    config.prior_std = [0.3, 0.2, 0.1];
+    let mut graph = PoseGraph::new(start, config, capacity);
+    let readings = [(3.0, 0.7), (2.0, -1.2)];
+    for (id, &(range, bearing)) in readings.iter().enumerate() {
+        graph
+            .add_observation(0, &reading(id as u32, range, bearing))
+            .unwrap();
+    }
+    graph.optimize(10).unwrap();
+    let mut covariances = Vec::new();
+    graph.landmark_covariances(&mut covariances).unwrap();
+    let sigma0 = Matrix3::from_diagonal(&Vector3::from(config.prior_std.map(|s| s * s)));
+    let jacobians = readings.map(|(range, bearing)| {
+        let (s, c) = (start.theta + bearing).sin_cos();
+        let a = Matrix2x3::new(1.0, 0.0, -range * s, 0.0, 1.0, range * c);
+        let b = Matrix2::new(c, -range * s, s, range * c);
+        (a, b)
+    });
+    let block = |i: usize, j: usize| {
+        let (ai, bi) = jacobians[i];
+        let shared = ai * sigma0 * jacobians[j].0.transpose();
+        if i == j {
+            shared + bi * noise.q_beacon() * bi.transpose()
+        } else {
+            shared
+        }
+    };
+    let expected = mole_localization::slam::mean_nees_dof(2, block);
+    let got = graph.landmark_nees_dof();
+    println!("ν {got} expected {expected}");
+    assert!(expected > 2.0 && expected < 3.5, "{expected}");
+    assert!((got - expected).abs() < 1e-9, "{got} vs {expected}");
+}
+
 /// Compiles only for types a background solver thread can own.
 fn owned_by_a_solver_thread<T: Send + 'static>(_: &T) {}
 

@@ -218,7 +218,12 @@ fn true_path_run(seed: u64) -> MapScore {
         slam.correct(beacons.readings());
     });
     let mut out: Box<Landmarks> = bytemuck::zeroed_box();
-    write_landmarks(EstimatorKind::FastSlam, slam.landmarks(), &mut out);
+    write_landmarks(
+        EstimatorKind::FastSlam,
+        slam.landmarks(),
+        slam.mean_nees_dof(),
+        &mut out,
+    );
     score_map(&out, &ring_beacons())
 }
 

@@ -17,7 +17,7 @@ mod truth;
 
 pub use ending::{Ending, LOCKSTEP_DRAIN, RunEnding};
 pub use progress::{LIVELOCK_S, Progress};
-pub use slam::{CHI2_2_95, SlamSummary, mean_nees_interval, nees_2d};
+pub use slam::{CHI2_2_95, SlamSummary, mean_nees_interval, mean_nees_interval_of_dof, nees_2d};
 pub use summary::{
     FaultRecord, LatencyUs, RunMeta, Summary, SwapRecord, TopicSummary, UpdateUs, fnv1a64,
     read_summary, write_summary,

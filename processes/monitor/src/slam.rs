@@ -34,9 +34,14 @@ pub struct SlamSummary {
     /// Mean 2-D NEES eᵀΣ⁻¹e of the matched landmarks (2 for a consistent map; `null`: none with
     /// a positive definite Σ).
     pub landmark_nees: Option<f64>,
-    /// The 95% interval of that mean for a consistent map of n landmarks:
-    /// [χ²₂ₙ(0.025)/n, χ²₂ₙ(0.975)/n].
+    /// The 95% interval of that mean for a consistent map, [2·χ²_ν(0.025)/ν, 2·χ²_ν(0.975)/ν]
+    /// with ν = `landmark_nees_dof` ([χ²₂ₙ(0.025)/n, χ²₂ₙ(0.975)/n] for independent landmarks).
     pub landmark_nees_interval: Option<[f64; 2]>,
+    /// ν: the degrees of freedom of that mean under the estimator's joint covariance, which
+    /// it publishes (`Landmarks::nees_dof`: the landmarks share the error of the poses they
+    /// were seen from), at most 2n; 2n, as for independent landmarks, when it does not say.
+    #[serde(default)]
+    pub landmark_nees_dof: Option<f64>,
     /// Landmarks whose NEES was computed (Σ positive definite).
     pub landmark_nees_samples: u32,
     /// `association_errors` over `landmarks` (`null`: no landmark).
@@ -70,6 +75,8 @@ pub struct SlamSummary {
 pub(crate) struct LandmarkMap {
     landmarks: Vec<Landmark>,
     tick: Option<u64>,
+    /// The map's `nees_dof` (0: not given).
+    nees_dof: f64,
 }
 
 impl LandmarkMap {
@@ -78,6 +85,7 @@ impl LandmarkMap {
         LandmarkMap {
             landmarks: Vec::with_capacity(MAX_LANDMARKS),
             tick: None,
+            nees_dof: 0.0,
         }
     }
 
@@ -86,6 +94,7 @@ impl LandmarkMap {
         self.landmarks.clear();
         self.landmarks.extend_from_slice(map.landmarks());
         self.tick = Some(map.header.tick);
+        self.nees_dof = map.nees_dof;
     }
 
     /// Whether any map arrived.
@@ -143,7 +152,16 @@ impl LandmarkMap {
             .then(|| f64::from(out.association_errors) / f64::from(out.landmarks));
         let n = out.landmark_nees_samples;
         out.landmark_nees = (n > 0).then(|| nees_sum / f64::from(n)).and_then(finite);
-        out.landmark_nees_interval = mean_nees_interval(2, n);
+        // The estimator's ν is of all its landmarks; the mean here may be of fewer.
+        let independent = 2.0 * f64::from(n);
+        let dof = match self.nees_dof {
+            d if d > 0.0 => d.clamp(2.0_f64.min(independent), independent),
+            _ => independent,
+        };
+        if n > 0 {
+            out.landmark_nees_dof = Some(dof);
+            out.landmark_nees_interval = mean_nees_interval_of_dof(dof);
+        }
         out
     }
 }
@@ -178,6 +196,17 @@ pub fn mean_nees_interval(dof: u32, n: u32) -> Option<[f64; 2]> {
     let chi2 = ChiSquared::new(total).ok()?;
     let n = f64::from(n);
     Some([chi2.inverse_cdf(0.025) / n, chi2.inverse_cdf(0.975) / n])
+}
+
+/// The two-sided 95% interval of a mean 2-D NEES whose sum is Satterthwaite's a·χ²_ν (a = 2n/ν,
+/// so the mean is 2·χ²_ν/ν): [2·χ²_ν(0.025)/ν, 2·χ²_ν(0.975)/ν]. ν = 2n gives
+/// [`mean_nees_interval`]`(2, n)`. `None` unless ν > 0.
+pub fn mean_nees_interval_of_dof(dof: f64) -> Option<[f64; 2]> {
+    let chi2 = ChiSquared::new(dof).ok()?;
+    Some([
+        2.0 * chi2.inverse_cdf(0.025) / dof,
+        2.0 * chi2.inverse_cdf(0.975) / dof,
+    ])
 }
 
 /// A 95% confidence ellipse: semi-axes (m) and the major axis's angle from +x (rad).

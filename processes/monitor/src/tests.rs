@@ -1031,6 +1031,33 @@ fn slam_section_scores_a_hand_made_map() {
     assert_relative_eq!(hi, 14.4494 / 3.0, max_relative = 1e-4);
 }
 
+/// The interval is drawn from the degrees of freedom the estimator publishes for its map's
+/// mean NEES (its landmarks share an error): ν = 3 here, χ²₃(0.025) = 0.2158 and
+/// χ²₃(0.975) = 9.3484 (tables), times 2/3; without it, from 2n as for independent landmarks.
+#[test]
+fn the_nees_interval_is_of_the_dof_the_estimator_publishes() {
+    let items = [
+        (0, 1.1, 1.0, [0.01, 0.01]),
+        (1, 3.0, 1.2, [0.01, 0.01]),
+        (2, 2.0, 1.8, [0.09, 0.09]),
+    ];
+    let mut m = Monitor::new(&beacon_world()).unwrap();
+    let mut map = landmark_map(40, EstimatorKind::EkfSlam, &items);
+    map.nees_dof = 3.0;
+    m.on_landmarks(&map);
+    let s = m.summary(&meta()).slam.expect("a landmark map arrived");
+    assert_eq!(s.landmark_nees_dof, Some(3.0));
+    let [lo, hi] = s.landmark_nees_interval.unwrap();
+    assert_relative_eq!(lo, 2.0 * 0.2158 / 3.0, max_relative = 1e-3);
+    assert_relative_eq!(hi, 2.0 * 9.3484 / 3.0, max_relative = 1e-4);
+    // More than 2n cannot be: clamped to the independent landmarks' 2n = 6.
+    map.nees_dof = 50.0;
+    m.on_landmarks(&map);
+    let s = m.summary(&meta()).slam.unwrap();
+    assert_eq!(s.landmark_nees_dof, Some(6.0));
+    assert_eq!(s.landmark_nees_interval, mean_nees_interval(2, 3));
+}
+
 /// A later map replaces the earlier one, and a full-covariance NEES uses the off-diagonal.
 #[test]
 fn slam_section_scores_the_latest_map_with_its_full_covariance() {

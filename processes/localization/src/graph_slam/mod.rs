@@ -465,6 +465,12 @@ impl PoseGraph {
         Ok(())
     }
 
+    /// The degrees of freedom of the mean landmark NEES under the joint landmark covariance the
+    /// last [`Self::landmark_covariances`] solved for (0 before one).
+    pub fn landmark_nees_dof(&self) -> f64 {
+        self.normal.landmark_nees_dof()
+    }
+
     /// The current estimate of every pose.
     pub fn poses(&self) -> &[Vector3<f64>] {
         &self.problem.poses

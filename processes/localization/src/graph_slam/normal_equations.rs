@@ -63,6 +63,9 @@ pub struct NormalEquations {
     factor_values: Vec<f64>,
     scratch: MemBuffer,
     covariance_rhs: Vec<f64>,
+    /// The landmark block of H⁻¹ from the last [`Self::landmark_covariances`], column-major,
+    /// (2·landmarks)², for the map's NEES degrees of freedom.
+    landmark_block: Vec<f64>,
 }
 
 impl NormalEquations {
@@ -85,6 +88,7 @@ impl NormalEquations {
             factor_values: Vec::new(),
             scratch: MemBuffer::new(StackReq::EMPTY),
             covariance_rhs: Vec::new(),
+            landmark_block: Vec::new(),
         }
     }
 
@@ -338,6 +342,10 @@ impl NormalEquations {
         let symbolic = self.symbolic.as_ref().expect("analyse runs before solve");
         let llt = LltRef::new(symbolic, &self.factor_values);
         out.clear();
+        let m = 2 * n_landmarks;
+        self.landmark_block.clear();
+        self.landmark_block.resize(m * m, 0.0);
+        let landmarks_from = 3 * self.n_poses;
         let mut first = 0;
         while first < n_landmarks {
             let count = COVARIANCE_LANDMARKS_PER_SOLVE.min(n_landmarks - first);
@@ -349,6 +357,10 @@ impl NormalEquations {
             }
             let rhs = MatMut::from_column_major_slice_mut(&mut self.covariance_rhs, n, 2 * count);
             llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.scratch));
+            for c in 0..2 * count {
+                let column = &self.covariance_rhs[c * n + landmarks_from..][..m];
+                self.landmark_block[(2 * first + c) * m..][..m].copy_from_slice(column);
+            }
             for l in 0..count {
                 let (c0, r0) = (2 * l, base + 2 * l);
                 let at = |r: usize, c: usize| self.covariance_rhs[(c0 + c) * n + r0 + r];
@@ -359,5 +371,16 @@ impl NormalEquations {
             first += count;
         }
         Ok(())
+    }
+
+    /// The degrees of freedom of the mean landmark NEES ([`crate::slam::mean_nees_dof`]) under
+    /// the landmark block of H⁻¹ that the last [`Self::landmark_covariances`] solved for.
+    pub fn landmark_nees_dof(&self) -> f64 {
+        let m = (self.landmark_block.len() as f64).sqrt() as usize;
+        let at = |r: usize, c: usize| self.landmark_block[c * m + r];
+        crate::slam::mean_nees_dof(m / 2, |i, j| {
+            let (r, c) = (2 * i, 2 * j);
+            Matrix2::new(at(r, c), at(r, c + 1), at(r + 1, c), at(r + 1, c + 1))
+        })
     }
 }

@@ -100,6 +100,8 @@ struct Posted {
     landmarks: Vec<(usize, Vector2<f64>, Matrix2<f64>)>,
     /// The smoothed trajectory, the anchor left out (swapped in and out, never copied).
     trajectory: Vec<StampedPose>,
+    /// The degrees of freedom of the smoothed map's mean landmark NEES.
+    nees_dof: f64,
     /// The graph is full: no more solutions.
     stopped: bool,
 }
@@ -117,6 +119,8 @@ pub struct GraphSlamEstimator {
     pending: bool,
     /// The newest solution's landmarks by front-end slot.
     smoothed: Vec<Option<(Vector2<f64>, Matrix2<f64>)>>,
+    /// The smoothed map's mean-NEES degrees of freedom, with `smoothed`.
+    smoothed_dof: f64,
     smoothed_pose: Option<(u64, Pose2)>,
     /// The newest solution's trajectory.
     trajectory: Vec<StampedPose>,
@@ -177,6 +181,7 @@ impl GraphSlamEstimator {
             pose: Vector3::zeros(),
             landmarks: Vec::with_capacity(SLAM_CAPACITY),
             trajectory: Vec::with_capacity(SMOOTHER_POSES),
+            nees_dof: 0.0,
             stopped: false,
         }));
         let shared = Arc::clone(&posted);
@@ -198,6 +203,7 @@ impl GraphSlamEstimator {
             },
             pending: false,
             smoothed: vec![None; SLAM_CAPACITY],
+            smoothed_dof: 0.0,
             smoothed_pose: None,
             trajectory: Vec::with_capacity(SMOOTHER_POSES),
             solves: 0,
@@ -294,6 +300,7 @@ impl GraphSlamEstimator {
             Pose2::new(posted.pose[0], posted.pose[1], posted.pose[2]),
         ));
         self.smoothed.fill(None);
+        self.smoothed_dof = posted.nees_dof;
         for &(slot, mean, cov) in &posted.landmarks {
             if let Some(entry) = self.smoothed.get_mut(slot) {
                 *entry = Some((mean, cov));
@@ -392,7 +399,16 @@ impl Estimator for GraphSlamEstimator {
                 }
                 l
             });
-        write_landmarks(EstimatorKind::GraphSlam, landmarks, out)
+        // The smoother's degrees of freedom when its solution holds every landmark written,
+        // else the front-end's (a landmark seen since the last solve is the filter's alone).
+        let n = self.front.filter().len();
+        let all_smoothed = live && self.smoothed.iter().take(n).all(Option::is_some);
+        let dof = if all_smoothed {
+            self.smoothed_dof
+        } else {
+            self.front.filter().mean_nees_dof()
+        };
+        write_landmarks(EstimatorKind::GraphSlam, landmarks, dof, out)
     }
 
     fn smoother_solves(&self) -> u64 {
@@ -532,6 +548,7 @@ fn solve_and_post(
     p.solves += 1;
     p.steps = (graph.poses().len() - 1) as u64;
     p.pose = graph.poses()[graph.poses().len() - 1];
+    p.nees_dof = graph.landmark_nees_dof();
     p.landmarks.clear();
     for ((&slot, &mean), &cov) in graph
         .landmark_ids()

@@ -253,6 +253,16 @@ impl<M: MotionModel> EkfSlam<M> {
         (0..self.n).filter_map(|s| self.landmark(s))
     }
 
+    /// The degrees of freedom of the map's mean landmark NEES under Σ's landmark block
+    /// ([`crate::slam::mean_nees_dof`]).
+    pub fn mean_nees_dof(&self) -> f64 {
+        crate::slam::mean_nees_dof(self.n, |i, j| {
+            self.sigma
+                .fixed_view::<2, 2>(offset(i), offset(j))
+                .into_owned()
+        })
+    }
+
     /// The active mean, 3 + 2n long: pose then landmarks in slot order.
     pub fn state(&self) -> nalgebra::DVectorView<'_, f64> {
         self.mu.rows(0, offset(self.n))

@@ -22,11 +22,12 @@ use nalgebra::{Matrix2, Matrix3, Vector2};
 /// Landmarks a SLAM estimator has room for: as many as `localization/landmarks` carries.
 pub const SLAM_CAPACITY: usize = MAX_LANDMARKS;
 
-/// Fills `n_landmarks`, `estimator` (`kind`'s code) and the landmarks of `out` from
-/// `landmarks` (at most [`MAX_LANDMARKS`]), never its header; returns true.
+/// Fills `n_landmarks`, `estimator` (`kind`'s code), `nees_dof` and the landmarks of `out`
+/// from `landmarks` (at most [`MAX_LANDMARKS`]), never its header; returns true.
 pub fn write_landmarks(
     kind: EstimatorKind,
     landmarks: impl Iterator<Item = Landmark>,
+    nees_dof: f64,
     out: &mut Landmarks,
 ) -> bool {
     let mut n = 0;
@@ -42,6 +43,7 @@ pub fn write_landmarks(
     }
     out.n_landmarks = n;
     out.estimator = kind.code();
+    out.nees_dof = nees_dof;
     true
 }
 
@@ -202,7 +204,8 @@ impl Estimator for EkfSlamEstimator {
     }
 
     fn write_landmarks(&self, out: &mut Landmarks) -> bool {
-        write_landmarks(EstimatorKind::EkfSlam, self.slam.landmarks(), out)
+        let dof = self.slam.mean_nees_dof();
+        write_landmarks(EstimatorKind::EkfSlam, self.slam.landmarks(), dof, out)
     }
 
     fn fuse_landmarks(&mut self, other: &Landmarks) -> Option<FuseReport> {
@@ -329,6 +332,7 @@ impl Estimator for FastSlamEstimator {
     }
 
     fn write_landmarks(&self, out: &mut Landmarks) -> bool {
-        write_landmarks(EstimatorKind::FastSlam, self.slam.landmarks(), out)
+        let dof = self.slam.mean_nees_dof();
+        write_landmarks(EstimatorKind::FastSlam, self.slam.landmarks(), dof, out)
     }
 }

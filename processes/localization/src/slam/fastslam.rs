@@ -18,7 +18,7 @@ use crate::kalman::kalman_correct;
 use crate::models::{odometry_is_plausible, unicycle_g, wrap_near};
 use crate::noise::NoiseModel;
 use crate::pf::{low_variance_resample, normalise_log_weights};
-use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, Pose2, wrap_angle};
+use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, MAX_LANDMARKS, Pose2, wrap_angle};
 use nalgebra::{Cholesky, Matrix2, Matrix3, Vector2, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -233,6 +233,37 @@ impl FastSlam {
                 mean,
                 cov,
             }
+        })
+    }
+
+    /// The degrees of freedom of the map's mean landmark NEES ([`crate::slam::mean_nees_dof`])
+    /// under the particles' mixture, whose cross-covariances are the landmarks' spread across
+    /// particles, Σ_p w_p (μ_pi − μ̄ᵢ)(μ_pj − μ̄ⱼ)ᵀ: each particle's landmarks are independent
+    /// given its path, but the paths differ. With unknown correspondences the map is the best
+    /// particle's alone, whose landmarks are independent: 2n.
+    pub fn mean_nees_dof(&self) -> f64 {
+        let n = self.set.count[self.best].min(MAX_LANDMARKS);
+        if self.config.correspondence != Correspondence::Known {
+            return if n > 0 { 2.0 * n as f64 } else { 0.0 };
+        }
+        let cap = self.capacity;
+        let mut mean = [Vector2::zeros(); MAX_LANDMARKS];
+        for (slot, m) in mean.iter_mut().enumerate().take(n) {
+            for (j, w) in self.w.iter().enumerate() {
+                *m += self.set.lm_mean[j * cap + slot] * *w;
+            }
+        }
+        crate::slam::mean_nees_dof(n, |a, b| {
+            let mut c = Matrix2::zeros();
+            for (j, w) in self.w.iter().enumerate() {
+                let da = self.set.lm_mean[j * cap + a] - mean[a];
+                let db = self.set.lm_mean[j * cap + b] - mean[b];
+                c += da * db.transpose() * *w;
+                if a == b {
+                    c += self.set.lm_cov[j * cap + a] * *w;
+                }
+            }
+            c
         })
     }
 

@@ -26,12 +26,14 @@ mod ci;
 mod ekf_slam;
 mod estimators;
 mod fastslam;
+mod map_nees;
 mod peer;
 
 pub use ci::{Fused, covariance_intersection};
 pub use ekf_slam::{EkfSlam, FuseReport, LandmarkInit, Linearisation, MotionModel, UnicycleMotion};
 pub use estimators::{EkfSlamEstimator, FastSlamEstimator, SLAM_CAPACITY, write_landmarks};
 pub use fastslam::{FastSlam, FastSlamConfig};
+pub use map_nees::mean_nees_dof;
 pub use peer::{
     DEFAULT_FUSE_EVERY, FUSING_ESTIMATOR, FusionTotals, PEER_LANDMARKS, PeerArgs, PeerFusion,
     PeerRefused, check_peer,
