@@ -13,8 +13,9 @@
 //! when the frontier is reached, vanishes, or every `reselect_every` steps. A frontier reached
 //! that is still there is exhausted (its cells count as no frontier from then on); a target
 //! with neither approach nor new area for `give_up_s` is given up and counted (§5.3, "give
-//! up"). Done when no frontier is worth going to: none of `min_cluster` cells or more that is
-//! reachable, not exhausted and not given up (algorithms §5, "complete"; `MODE_DONE`,
+//! up"; with nothing else reachable the cells given up once are tried again, and a second
+//! give-up holds). Done when no frontier is worth going to: none of `min_cluster` cells or more
+//! that is reachable, not exhausted and not given up (algorithms §5, "complete"; `MODE_DONE`,
 //! `STATUS_EXPLORATION_COMPLETE`, zero wish).
 
 use crate::apf::{Apf, ApfConfig};
@@ -139,6 +140,11 @@ pub struct FrontierSelector {
     /// Frontier cells the robot went to and could not explore (see [`Self::exhaust`]); they
     /// are no frontier any more. Cleared when the grid's shape changes.
     exhausted: Vec<bool>,
+    /// How many times each cell was given up (see [`Self::exhaust_around`]); cleared with
+    /// `exhausted`.
+    given_up: Vec<u8>,
+    /// Whether cells given up once are frontier again ([`Self::retry_given_up`]).
+    retrying: bool,
     /// Whether the robot stood inside the inflation at the last selection (`None`: the grid
     /// was unusable or the robot off it).
     inside_inflation: Option<bool>,
@@ -169,6 +175,8 @@ impl FrontierSelector {
             path_cells: Vec::with_capacity(n),
             path: Vec::with_capacity(MAX_PATH),
             exhausted: Vec::with_capacity(n),
+            given_up: Vec::with_capacity(n),
+            retrying: false,
             inside_inflation: None,
         }
     }
@@ -188,10 +196,10 @@ impl FrontierSelector {
         }
     }
 
-    /// Frontier cells within `radius` m of cell `cell` are no frontier from now on: a target
-    /// given up (algorithms §5.3, "give up").
+    /// Frontier cells within `radius` m of cell `cell` are given up (algorithms §5.3, "give
+    /// up"): no frontier until [`Self::retry_given_up`], and for good once given up twice.
     pub fn exhaust_around(&mut self, cell: usize, radius: f64) {
-        if self.w == 0 || self.exhausted.len() != self.w * self.h || cell >= self.exhausted.len() {
+        if self.w == 0 || self.given_up.len() != self.w * self.h || cell >= self.given_up.len() {
             return;
         }
         let (w, h) = (self.w as i64, self.h as i64);
@@ -202,10 +210,29 @@ impl FrontierSelector {
                 if ((x - cx) * (x - cx) + (y - cy) * (y - cy)) as f64 * self.res * self.res
                     <= radius * radius
                 {
-                    self.exhausted[(y * w + x) as usize] = true;
+                    let n = &mut self.given_up[(y * w + x) as usize];
+                    *n = n.saturating_add(1);
                 }
             }
         }
+    }
+
+    /// With no other frontier reachable: the cells given up once are frontier again, once per
+    /// run, and their second give-up holds for good. A give-up may have been a passing failure
+    /// (the robot circled at a corner it passes from another side), and held for good it ended
+    /// an exploration at 85% coverage with the only way into a corridor given up. Returns
+    /// whether that changed anything.
+    pub fn retry_given_up(&mut self) -> bool {
+        if self.retrying || !self.given_up.contains(&1) {
+            return false;
+        }
+        self.retrying = true;
+        true
+    }
+
+    /// Whether the cells given up once are frontier again.
+    pub fn retrying(&self) -> bool {
+        self.retrying
     }
 
     /// Unexplored cells of the grid at the last selection.
@@ -262,6 +289,8 @@ impl FrontierSelector {
         if (self.w, self.h) != (w, h) || self.exhausted.len() != w * h {
             self.exhausted.clear();
             self.exhausted.resize(w * h, false);
+            self.given_up.clear();
+            self.given_up.resize(w * h, 0);
         }
         (self.w, self.h, self.res, self.origin) = (w, h, res, [grid.origin_x, grid.origin_y]);
         let col = ((robot[0] - grid.origin_x) / res).floor();
@@ -319,8 +348,10 @@ impl FrontierSelector {
         const UNSEEN: u32 = u32::MAX;
         const NOT_FRONTIER: u32 = u32::MAX - 1;
         self.label.clear();
+        let (exhausted, given_up, retrying) = (&self.exhausted, &self.given_up, self.retrying);
+        let open = |i: usize| !exhausted[i] && (given_up[i] == 0 || (retrying && given_up[i] == 1));
         self.label.extend((0..w * h).map(|i| {
-            if is_frontier_cell(cells, w, h, i) && !self.exhausted[i] {
+            if is_frontier_cell(cells, w, h, i) && open(i) {
                 UNSEEN
             } else {
                 NOT_FRONTIER
@@ -658,8 +689,12 @@ impl Planner for FrontierExplorer {
                 self.misses = 0;
                 self.done = false;
             } else if crate::obstacles::grid_cell(grid, p[0], p[1]) == Some(CELL_FREE) {
-                // The robot is on the map and no frontier is reachable.
+                // The robot is on the map and no frontier is reachable: before calling it done,
+                // the frontier given up once is tried again.
                 self.misses += 1;
+                if self.misses >= self.config.done_after && self.selector.retry_given_up() {
+                    self.misses = 0;
+                }
                 self.done = self.misses >= self.config.done_after;
                 // Look again soon.
                 self.last_select = Some(
@@ -932,6 +967,49 @@ mod tests {
         e.write_status(&mut st);
         assert_eq!(st.give_ups, e.give_ups());
         assert_ne!(st.flags & STATUS_EXPLORATION_COMPLETE, 0);
+    }
+
+    /// Algorithms §5.3, "give up": with nothing else reachable, the frontier given up once is
+    /// tried again before exploration is complete, and given up again for good: the robot held
+    /// in place gives up every target twice. (Held for good after one give-up, exploration
+    /// ended at 85% coverage on a maze whose only way into a corridor was given up.)
+    #[test]
+    fn a_frontier_given_up_is_tried_again_before_exploration_is_complete() {
+        let g = half_explored_room();
+        let mut e = explorer();
+        let pose = mole_types::Pose2::new(0.5, 2.0, 0.0);
+        let mut c = Command::STOP;
+        let mut before_retry = None;
+        for tick in 0..40_000u64 {
+            c = e.step(&PlannerInput {
+                tick,
+                dt: 0.01,
+                pose,
+                scan: None,
+                tactile: None,
+                grid: Some(&g),
+                last_command: c,
+            });
+            if before_retry.is_none() && e.selector().retrying() {
+                before_retry = Some(e.give_ups());
+            }
+            if c.mode == MODE_DONE {
+                break;
+            }
+        }
+        assert_eq!(
+            c.mode,
+            MODE_DONE,
+            "not done after {} give-ups",
+            e.give_ups()
+        );
+        let first = before_retry.expect("the given-up frontier was tried again");
+        assert!(first >= 1, "{first}");
+        assert!(
+            e.give_ups() >= 2 * first,
+            "{} give-ups in all, {first} before the retry",
+            e.give_ups()
+        );
     }
 
     /// Algorithms §5.3: the only frontier lies behind a 0.3 m gap, narrower than the inflated
