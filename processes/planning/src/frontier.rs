@@ -923,18 +923,18 @@ mod tests {
         assert!(e.selections() >= 5 && !e.done() && e.give_ups() == 0);
     }
 
-    /// Algorithms §5.3, "give up": the robot held where it is never approaches the target;
-    /// after `give_up_s` without approach or new area the target is given up and counted, the
-    /// next one likewise, and once the whole frontier is given up exploration is complete.
-    #[test]
-    fn a_target_not_approached_in_time_is_given_up_and_counted_then_done() {
+    /// Steps an explorer held at one pose in [`half_explored_room`] at 100 Hz, calling `each`
+    /// after every step, until it is done or `ticks` steps went by; returns it and its last
+    /// command.
+    fn held_in_the_room(
+        ticks: u64,
+        mut each: impl FnMut(u64, &FrontierExplorer),
+    ) -> (FrontierExplorer, Command) {
         let g = half_explored_room();
         let mut e = explorer();
         let pose = mole_types::Pose2::new(0.5, 2.0, 0.0);
-        let window = (FrontierConfig::default().give_up_s / 0.01) as usize;
         let mut c = Command::STOP;
-        let mut first = None;
-        for tick in 0..10_000u64 {
+        for tick in 0..ticks {
             c = e.step(&PlannerInput {
                 tick,
                 dt: 0.01,
@@ -944,13 +944,26 @@ mod tests {
                 grid: Some(&g),
                 last_command: c,
             });
-            if first.is_none() && e.give_ups() > 0 {
-                first = Some(tick as usize);
-            }
+            each(tick, &e);
             if c.mode == MODE_DONE {
                 break;
             }
         }
+        (e, c)
+    }
+
+    /// Algorithms §5.3, "give up": the robot held where it is never approaches the target;
+    /// after `give_up_s` without approach or new area the target is given up and counted, the
+    /// next one likewise, and once the whole frontier is given up exploration is complete.
+    #[test]
+    fn a_target_not_approached_in_time_is_given_up_and_counted_then_done() {
+        let window = (FrontierConfig::default().give_up_s / 0.01) as usize;
+        let mut first = None;
+        let (e, c) = held_in_the_room(10_000, |tick, e| {
+            if first.is_none() && e.give_ups() > 0 {
+                first = Some(tick as usize);
+            }
+        });
         let first = first.unwrap_or_else(|| panic!("never given up"));
         assert!(
             (window..window + 10).contains(&first),
@@ -975,28 +988,12 @@ mod tests {
     /// ended at 85% coverage on a maze whose only way into a corridor was given up.)
     #[test]
     fn a_frontier_given_up_is_tried_again_before_exploration_is_complete() {
-        let g = half_explored_room();
-        let mut e = explorer();
-        let pose = mole_types::Pose2::new(0.5, 2.0, 0.0);
-        let mut c = Command::STOP;
         let mut before_retry = None;
-        for tick in 0..40_000u64 {
-            c = e.step(&PlannerInput {
-                tick,
-                dt: 0.01,
-                pose,
-                scan: None,
-                tactile: None,
-                grid: Some(&g),
-                last_command: c,
-            });
+        let (e, c) = held_in_the_room(40_000, |_, e| {
             if before_retry.is_none() && e.selector().retrying() {
                 before_retry = Some(e.give_ups());
             }
-            if c.mode == MODE_DONE {
-                break;
-            }
-        }
+        });
         assert_eq!(
             c.mode,
             MODE_DONE,
