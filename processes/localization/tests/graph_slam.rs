@@ -229,19 +229,37 @@ fn factor_jacobians_match_finite_differences() {
     }
 }
 
+/// A graph of the anchored first pose alone, with room for `landmarks` beacons read once each.
+fn one_pose_graph(start: Pose2, config: GraphSlamConfig, landmarks: usize) -> PoseGraph {
+    let capacity = GraphCapacity {
+        poses: 1,
+        landmarks,
+        observations: landmarks,
+    };
+    PoseGraph::new(start, config, capacity)
+}
+
+/// ∂m/∂x (A) and ∂m/∂z (B) of the inverse measurement model m = (x, y) + r·(cos, sin)(θ + b) at
+/// pose `start` for a reading (`range`, `bearing`).
+fn inverse_measurement_jacobians(
+    start: Pose2,
+    range: f64,
+    bearing: f64,
+) -> (Matrix2x3<f64>, Matrix2<f64>) {
+    let (s, c) = (start.theta + bearing).sin_cos();
+    let a = Matrix2x3::new(1.0, 0.0, -range * s, 0.0, 1.0, range * c);
+    let b = Matrix2::new(c, -range * s, s, range * c);
+    (a, b)
+}
+
 /// A beacon read once from the anchored first pose has the marginal covariance of linear error
 /// propagation through the inverse measurement model: A Σ₀ Aᵀ + B Q Bᵀ.
 #[test]
 fn landmark_covariance_matches_linear_propagation() {
     let noise = default_noise();
     let start = Pose2::new(1.0, -2.0, 0.4);
-    let capacity = GraphCapacity {
-        poses: 1,
-        landmarks: 1,
-        observations: 1,
-    };
     let config = GraphSlamConfig::new(noise);
-    let mut graph = PoseGraph::new(start, config, capacity);
+    let mut graph = one_pose_graph(start, config, 1);
     let (range, bearing) = (3.0, 0.7);
     graph
         .add_observation(0, &reading(4, range, bearing))
@@ -249,9 +267,7 @@ fn landmark_covariance_matches_linear_propagation() {
     graph.optimize(10).unwrap();
     let mut covariances = Vec::new();
     graph.landmark_covariances(&mut covariances).unwrap();
-    let (s, c) = (start.theta + bearing).sin_cos();
-    let a = Matrix2x3::new(1.0, 0.0, -range * s, 0.0, 1.0, range * c);
-    let b = Matrix2::new(c, -range * s, s, range * c);
+    let (a, b) = inverse_measurement_jacobians(start, range, bearing);
     let sigma0 = Matrix3::from_diagonal(&Vector3::from(config.prior_std.map(|s| s * s)));
     let expected = a * sigma0 * a.transpose() + b * noise.q_beacon() * b.transpose();
     assert_eq!(covariances.len(), 1);
@@ -270,15 +286,10 @@ fn landmark_covariance_matches_linear_propagation() {
 fn landmark_nees_dof_is_that_of_the_joint_covariance() {
     let noise = default_noise();
     let start = Pose2::new(1.0, -2.0, 0.4);
-    let capacity = GraphCapacity {
-        poses: 1,
-        landmarks: 2,
-        observations: 2,
-    };
     // An uncertain anchor, so that the error the two share is not negligible.
     let mut config = GraphSlamConfig::new(noise);
     config.prior_std = [0.3, 0.2, 0.1];
-    let mut graph = PoseGraph::new(start, config, capacity);
+    let mut graph = one_pose_graph(start, config, 2);
     let readings = [(3.0, 0.7), (2.0, -1.2)];
     for (id, &(range, bearing)) in readings.iter().enumerate() {
         graph
@@ -289,12 +300,8 @@ fn landmark_nees_dof_is_that_of_the_joint_covariance() {
     let mut covariances = Vec::new();
     graph.landmark_covariances(&mut covariances).unwrap();
     let sigma0 = Matrix3::from_diagonal(&Vector3::from(config.prior_std.map(|s| s * s)));
-    let jacobians = readings.map(|(range, bearing)| {
-        let (s, c) = (start.theta + bearing).sin_cos();
-        let a = Matrix2x3::new(1.0, 0.0, -range * s, 0.0, 1.0, range * c);
-        let b = Matrix2::new(c, -range * s, s, range * c);
-        (a, b)
-    });
+    let jacobians =
+        readings.map(|(range, bearing)| inverse_measurement_jacobians(start, range, bearing));
     let block = |i: usize, j: usize| {
         let (ai, bi) = jacobians[i];
         let shared = ai * sigma0 * jacobians[j].0.transpose();
