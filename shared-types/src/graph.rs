@@ -103,6 +103,7 @@ pub const GRAPH: &[RoleSpec] = &[
             SENSING_ODOM.name,
             SENSING_BEACONS.name,
             SENSING_FIX.name,
+            SENSING_TACTILE.name,
         ],
         outputs: &[
             LOCALIZATION_POSE.name,

@@ -7,8 +7,8 @@
 
 use crate::kalman::{CHI2_999_2DOF, KalmanError, kalman_correct, symmetrize};
 use crate::models::{
-    BeaconTable, MIN_RANGE, odometry_is_plausible, range_bearing_h, range_bearing_jacobian_h,
-    unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v,
+    BeaconTable, MIN_RANGE, add_slide, range_bearing_h, range_bearing_jacobian_h,
+    sliding_is_plausible, unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v,
 };
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError, Readings};
@@ -150,20 +150,34 @@ impl Ekf {
     }
 
     /// Prediction (algorithms §6.6): μ̄ = g(μ, u), Σ̄ = G_t Σ G_tᵀ + R_t with R_t = V_t M_t V_tᵀ + floor.
-    /// Odometry that is not plausible ([`odometry_is_plausible`]: non-finite, negative dt, or
-    /// beyond the bounds of [`crate::models`]) is ignored (and counted); dt = 0 changes nothing.
+    /// Odometry that is not plausible ([`crate::models::odometry_is_plausible`]: non-finite,
+    /// negative dt, or beyond the bounds of [`crate::models`]) is ignored (and counted); dt = 0
+    /// changes nothing.
     pub fn predict_with(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), ReadingError> {
-        if !odometry_is_plausible(v, omega, dt) {
+        self.predict_sliding_with(v, omega, dt, &Vector2::zeros())
+    }
+
+    /// [`Ekf::predict_with`] followed by the slide `sideways` the wheels did not see (robot
+    /// frame at the arc's end, [`crate::contact`]): μ̄ moves by R(θ̄)·b and G_t turns it with θ.
+    pub fn predict_sliding_with(
+        &mut self,
+        v: f64,
+        omega: f64,
+        dt: f64,
+        sideways: &Vector2<f64>,
+    ) -> Result<(), ReadingError> {
+        if !sliding_is_plausible(v, omega, dt, sideways) {
             self.ignored += 1;
             return Err(ReadingError::Invalid);
         }
         if dt == 0.0 {
             return Ok(());
         }
-        let g_t = unicycle_jacobian_g(&self.mu, v, omega, dt);
+        let mut g_t = unicycle_jacobian_g(&self.mu, v, omega, dt);
         let v_t = unicycle_jacobian_v(&self.mu, v, omega, dt);
         let r_t = v_t * self.noise.m_t() * v_t.transpose() + self.noise.r_floor(dt);
         self.mu = unicycle_g(&self.mu, v, omega, dt);
+        add_slide(&mut self.mu, Some(&mut g_t), sideways);
         self.sigma = g_t * self.sigma * g_t.transpose() + r_t;
         symmetrize(&mut self.sigma);
         Ok(())
@@ -281,6 +295,11 @@ impl Estimator for Ekf {
     fn predict(&mut self, odom: &Odom) {
         // A refused control is counted inside; nothing else to do with it here.
         let _ = self.predict_with(odom.v, odom.omega, odom.dt);
+    }
+
+    fn predict_sliding(&mut self, odom: &Odom, sideways: &Vector2<f64>) {
+        // A refused control is counted inside.
+        let _ = self.predict_sliding_with(odom.v, odom.omega, odom.dt, sideways);
     }
 
     /// Sequential updates, one per beacon reading in order, then the fix.

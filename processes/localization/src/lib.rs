@@ -13,6 +13,7 @@
 //! covariance, Q_t the MEASUREMENT noise covariance.
 
 pub mod bayes;
+pub mod contact;
 pub mod ekf;
 pub mod graph_slam;
 pub mod kalman;
@@ -30,11 +31,14 @@ pub use models::BeaconTable;
 pub use noise::NoiseModel;
 pub use pf::{ParticleFilter, PfConfig, low_variance_resample};
 
+pub use contact::Slide;
 pub use graph_slam::GraphSlamEstimator;
 pub use mole_types::EstimatorKind;
 use mole_types::{
-    Beacons, Fix, Landmarks, Odom, Particles, Pose, Pose2, Trajectory, WorldMap, arc_between,
+    Beacons, Fix, Landmarks, Odom, Particles, Pose, Pose2, Tactile, Trajectory, WorldMap,
+    arc_between,
 };
+use nalgebra::Vector2;
 pub use slam::{EkfSlamEstimator, FastSlamEstimator};
 use thiserror::Error;
 
@@ -51,6 +55,9 @@ pub struct Readings<'a> {
     pub beacons: Option<&'a Beacons>,
     /// The position fix of this step (it may still say `valid == 0`: no fix).
     pub fix: Option<&'a Fix>,
+    /// The motion of this step when contacts blocked the wheels ([`contact`]): predicted instead
+    /// of `odom`.
+    pub slide: Option<Slide>,
 }
 
 impl<'a> Readings<'a> {
@@ -60,6 +67,7 @@ impl<'a> Readings<'a> {
             odom,
             beacons: None,
             fix: None,
+            slide: None,
         }
     }
 
@@ -71,6 +79,13 @@ impl<'a> Readings<'a> {
     /// With the step's position fix, if any.
     pub fn with_fix(self, fix: Option<&'a Fix>) -> Self {
         Self { fix, ..self }
+    }
+
+    /// With the step's tactile ring, if any, read with the sensors' force σ (N): when its
+    /// contacts blocked the wheels, the step predicts their [`Slide`] instead of `odom`.
+    pub fn with_contacts(self, tactile: Option<&Tactile>, force_std: f64) -> Self {
+        let slide = tactile.and_then(|t| contact::slide_along_contacts(self.odom, t, force_std));
+        Self { slide, ..self }
     }
 }
 
@@ -124,9 +139,21 @@ pub trait Estimator {
     /// Correction step (algorithms §6.3): folds in every correction reading `readings` holds
     /// (beacons, fix), and nothing for the sensors that are `None`.
     fn correct(&mut self, readings: &Readings<'_>);
-    /// One step: predict with `readings.odom`, then correct with the rest.
+    /// Prediction with the motion of a step against a wall ([`contact`]): the arc of `odom`,
+    /// then the translation `sideways` (robot frame at the arc's end, m) the wheels did not see.
+    /// By default only the arc is predicted (the histogram filter and the KF); the EKF, the PF
+    /// and the SLAM estimators carry the slide too.
+    fn predict_sliding(&mut self, odom: &Odom, sideways: &Vector2<f64>) {
+        let _ = sideways;
+        self.predict(odom);
+    }
+    /// One step: predict with `readings.odom` (or its slide against contacts), then correct
+    /// with the rest.
     fn step(&mut self, readings: &Readings<'_>) {
-        self.predict(readings.odom);
+        match &readings.slide {
+            Some(slide) => self.predict_sliding(&slide.odom, &slide.sideways),
+            None => self.predict(readings.odom),
+        }
         self.correct(readings);
     }
     /// The mean pose, θ wrapped to (−π, π].

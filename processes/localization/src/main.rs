@@ -1,7 +1,8 @@
 //! The localization process: estimates the pose from odometry, beacons and position fixes; the
 //! SLAM estimators estimate the beacon map too.
 //!
-//! world/map once, then sensing/{odom, beacons, fix} every step → localization/pose, and
+//! world/map once, then sensing/{odom, beacons, fix, tactile} every step (the tactile ring for
+//! the wheels' slide along a wall) → localization/pose, and
 //! localization/particles (PF) or localization/landmarks (SLAM), and localization/trajectory
 //! after each smoother solve (GraphSLAM). With `--peer` (EKF-SLAM) the landmarks are offered to
 //! another robot on peers/localization/landmarks too, and its offer is fused into them.
@@ -66,6 +67,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let odom = p.trigger(topics::SENSING_ODOM, Order::Newest)?;
     let beacons = p.input(topics::SENSING_BEACONS, Rule::SameTick)?;
     let fix = p.input(topics::SENSING_FIX, Rule::SameTick)?;
+    let tactile = p.input(topics::SENSING_TACTILE, Rule::SameTick)?;
     let mut pose_out = p.output(topics::LOCALIZATION_POSE)?;
     let mut particles_out = p.output(topics::LOCALIZATION_PARTICLES)?;
     let mut landmarks_out = p.output(topics::LOCALIZATION_LANDMARKS)?;
@@ -79,10 +81,12 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     // The odometry pose of the step handled last (a replacement: of its predecessor's last).
     let mut odom_before = pose_was.as_deref().map(|pose| pose.odom);
     let tick_dt = std::cell::Cell::new(0.0);
+    let force_std = std::cell::Cell::new(0.0);
 
     p.run(
         |start| {
             tick_dt.set(start.map.dt);
+            force_std.set(start.map.sensors.tactile_force_std);
             Ok(start_estimator(
                 kind,
                 start.map,
@@ -96,9 +100,12 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             let gap = step.ticks_since_last();
             let odom = odometry_since(measured, odom_before, gap, tick_dt.get());
             odom_before = Some([measured.x, measured.y, measured.theta]);
-            let readings = Readings::of(&odom).with_beacons(step.get(beacons));
+            let readings = Readings::of(&odom)
+                .with_beacons(step.get(beacons))
+                .with_fix(step.get(fix))
+                .with_contacts(step.get(tactile), force_std.get());
             let started = now_ns();
-            estimator.step(&readings.with_fix(step.get(fix)));
+            estimator.step(&readings);
             let update_ns = now_ns().saturating_sub(started);
             if let Some(peer_map) = peer_map {
                 fusion.step(step.tick(), step.get(peer_map), estimator.as_mut());

@@ -74,6 +74,23 @@ pub fn unicycle_g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Vector3<f64
     )
 }
 
+/// Adds to a moved pose `mu` (θ its heading after the move) the slide `sideways` its wheels did
+/// not see (robot frame, m; [`crate::contact`]) and to the motion Jacobian `g_t` the slide's
+/// turn with θ, ∂(R(θ)·b)/∂θ = (−(R(θ)b)_y, (R(θ)b)_x) (algorithms §6.6, "Against a wall").
+pub fn add_slide(mu: &mut Vector3<f64>, g_t: Option<&mut Matrix3<f64>>, sideways: &Vector2<f64>) {
+    let (sin_t, cos_t) = mu[2].sin_cos();
+    let (dx, dy) = (
+        cos_t * sideways[0] - sin_t * sideways[1],
+        sin_t * sideways[0] + cos_t * sideways[1],
+    );
+    mu[0] += dx;
+    mu[1] += dy;
+    if let Some(g_t) = g_t {
+        g_t[(0, 2)] -= dy;
+        g_t[(1, 2)] += dx;
+    }
+}
+
 /// G_t = ∂g/∂x at (μ, u), analytic (algorithms §6.6).
 pub fn unicycle_jacobian_g(mu: &Vector3<f64>, v: f64, omega: f64, dt: f64) -> Matrix3<f64> {
     let (s, phi, _) = chord(mu[2], v, omega, dt);
@@ -164,6 +181,12 @@ pub fn odometry_is_plausible(v: f64, omega: f64, dt: f64) -> bool {
     v.abs() <= MAX_ODOM_SPEED
         && omega.abs() <= MAX_ODOM_TURN_RATE
         && (0.0..=MAX_ODOM_DT).contains(&dt)
+}
+
+/// [`odometry_is_plausible`] for a step against a wall: the arc's, and a finite slide.
+#[inline]
+pub fn sliding_is_plausible(v: f64, omega: f64, dt: f64, sideways: &Vector2<f64>) -> bool {
+    odometry_is_plausible(v, omega, dt) && sideways.iter().all(|d| d.is_finite())
 }
 
 /// Known beacon positions looked up by the id a reading carries, without allocation.

@@ -8,13 +8,14 @@
 //! independent draws, which lose diversity faster; bearing innovations and particle headings are
 //! wrapped to (−π, π].
 
-use crate::models::{BeaconTable, MIN_RANGE, odometry_is_plausible, sinc, wrap_near};
+use crate::models::{BeaconTable, MIN_RANGE, sinc, sliding_is_plausible, wrap_near};
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError, Readings};
 use mole_types::{
     BeaconReading, BeaconSite, EstimatorKind, Fix, MAX_PARTICLES, Odom, Particle, Particles, Pose2,
     WorldMap, wrap_angle,
 };
+use nalgebra::Vector2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -278,9 +279,22 @@ impl ParticleFilter {
     /// The additive state noise of `noise.state_noise_rate` (the EKF's floor of R_t) is added to
     /// x, y and θ as well, so the particles diffuse in every direction, as the EKF's Σ does.
     ///
-    /// Odometry that is not plausible ([`odometry_is_plausible`]) is ignored and counted.
+    /// Odometry that is not plausible ([`crate::models::odometry_is_plausible`]) is ignored and
+    /// counted.
     pub fn predict_with(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), ReadingError> {
-        if !odometry_is_plausible(v, omega, dt) {
+        self.predict_sliding_with(v, omega, dt, &Vector2::zeros())
+    }
+
+    /// [`ParticleFilter::predict_with`] followed by the slide `sideways` the wheels did not see
+    /// (robot frame at the arc's end, [`crate::contact`]): each particle moves by R(θ_j)·b.
+    pub fn predict_sliding_with(
+        &mut self,
+        v: f64,
+        omega: f64,
+        dt: f64,
+        sideways: &Vector2<f64>,
+    ) -> Result<(), ReadingError> {
+        if !sliding_is_plausible(v, omega, dt, sideways) {
             self.ignored += 1;
             return Err(ReadingError::Invalid);
         }
@@ -294,6 +308,7 @@ impl ParticleFilter {
             floor[(1, 1)].sqrt(),
             floor[(2, 2)].sqrt(),
         );
+        let slides = sideways[0] != 0.0 || sideways[1] != 0.0;
         for j in 0..self.x.len() {
             let vj = v + sv * gauss(&mut self.rng);
             let wj = omega + sw * gauss(&mut self.rng);
@@ -314,6 +329,11 @@ impl ParticleFilter {
                 self.theta[j] += ft * gauss(&mut self.rng);
             }
             self.theta[j] = wrap_near(self.theta[j]);
+            if slides {
+                let (sin_t, cos_t) = self.theta[j].sin_cos();
+                self.x[j] += cos_t * sideways[0] - sin_t * sideways[1];
+                self.y[j] += sin_t * sideways[0] + cos_t * sideways[1];
+            }
         }
         self.summarise();
         Ok(())
@@ -438,6 +458,11 @@ impl Estimator for ParticleFilter {
     fn predict(&mut self, odom: &Odom) {
         // Refusals are counted inside.
         let _ = self.predict_with(odom.v, odom.omega, odom.dt);
+    }
+
+    fn predict_sliding(&mut self, odom: &Odom, sideways: &Vector2<f64>) {
+        // Refusals are counted inside.
+        let _ = self.predict_sliding_with(odom.v, odom.omega, odom.dt, sideways);
     }
 
     /// Weights from every beacon reading and the fix, normalisation (log-sum-exp), and

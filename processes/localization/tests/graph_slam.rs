@@ -11,6 +11,7 @@ use mole_localization::graph_slam::factors::{ObservationFactor, OdometryFactor};
 use mole_localization::graph_slam::{
     GraphCapacity, GraphError, GraphSlamConfig, PoseGraph, Termination,
 };
+use mole_localization::models::{add_slide, unicycle_g};
 use mole_localization::slam::{EkfSlam, SlamConfig};
 use mole_types::{Pose2, wrap_angle};
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
@@ -186,7 +187,19 @@ fn factor_jacobians_match_finite_differences() {
             rng.random_range(-2.0..2.0)
         };
         let dt = rng.random_range(0.01..0.5);
-        let factor = OdometryFactor::new(&noise, v, omega, dt).unwrap();
+        // Half the factors with a slide along a wall (its Jacobians are those without).
+        let sideways = if rng.random_bool(0.5) {
+            Vector2::new(rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1))
+        } else {
+            Vector2::zeros()
+        };
+        let factor = OdometryFactor::new(&noise, v, omega, dt)
+            .unwrap()
+            .with_slide(&sideways);
+        // The pose the slide reaches, where the wheels' arc ends and then slides, has no error.
+        let mut reached = unicycle_g(&x_a, v, omega, dt);
+        add_slide(&mut reached, None, &sideways);
+        assert!(factor.residual(&x_a, &reached).norm() < 1e-12);
         let (j_a, j_b) = factor.jacobians(&x_a, &x_b);
         let mut fd_a = Matrix3::zeros();
         let mut fd_b = Matrix3::zeros();

@@ -27,6 +27,9 @@ pub struct OdometryFactor {
     pub dt: f64,
     /// Ω = R⁻¹ in the frame of the earlier pose (see [`OdometryFactor::residual`]).
     pub information: Matrix3<f64>,
+    /// The slide along a wall the wheels did not see ([`crate::contact`]), in the frame of the
+    /// earlier pose (m); zero for a step without contact.
+    pub slide: Vector2<f64>,
 }
 
 impl OdometryFactor {
@@ -46,7 +49,23 @@ impl OdometryFactor {
             omega,
             dt,
             information,
+            slide: Vector2::zeros(),
         })
+    }
+
+    /// The factor with the slide `sideways` after the arc (robot frame at the arc's end, as
+    /// [`crate::Estimator::predict_sliding`] takes it), kept in the earlier pose's frame,
+    /// R(ω·dt)·b. In that frame the slide does not depend on either pose, so it shifts the
+    /// residual and leaves the Jacobians as they are.
+    pub fn with_slide(self, sideways: &Vector2<f64>) -> Self {
+        let (s, c) = (self.omega * self.dt).sin_cos();
+        Self {
+            slide: Vector2::new(
+                c * sideways[0] - s * sideways[1],
+                s * sideways[0] + c * sideways[1],
+            ),
+            ..self
+        }
     }
 
     /// e = Λ(θ_a)·(x_b ⊖ g(x_a, u)), Λ(θ) = diag(R(θ)ᵀ, 1): the pose difference of Thrun §11.2
@@ -58,8 +77,8 @@ impl OdometryFactor {
         let dx = x_b[0] - predicted[0];
         let dy = x_b[1] - predicted[1];
         Vector3::new(
-            c * dx + s * dy,
-            -s * dx + c * dy,
+            c * dx + s * dy - self.slide[0],
+            -s * dx + c * dy - self.slide[1],
             wrap_angle(x_b[2] - predicted[2]),
         )
     }

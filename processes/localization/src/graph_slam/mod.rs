@@ -251,17 +251,34 @@ impl PoseGraph {
     /// odometry factor, and returns its index; its initial estimate is g(newest estimate, u)
     /// (Thrun §11.2, Table 11.1 GraphSLAM_initialize).
     pub fn add_pose(&mut self, odometry: &Odom) -> Result<usize, GraphError> {
-        let result = self.try_add_pose(odometry);
+        self.add_sliding_pose(odometry, &Vector2::zeros())
+    }
+
+    /// [`PoseGraph::add_pose`] for a step whose wheels turned against a wall: the arc of
+    /// `odometry`, then the slide `sideways` (robot frame at the arc's end, [`crate::contact`]).
+    pub fn add_sliding_pose(
+        &mut self,
+        odometry: &Odom,
+        sideways: &Vector2<f64>,
+    ) -> Result<usize, GraphError> {
+        let result = self.try_add_pose(odometry, sideways);
         if result.is_err() {
             self.refused.odometry += 1;
         }
         result
     }
 
-    fn try_add_pose(&mut self, odometry: &Odom) -> Result<usize, GraphError> {
+    fn try_add_pose(
+        &mut self,
+        odometry: &Odom,
+        sideways: &Vector2<f64>,
+    ) -> Result<usize, GraphError> {
         let (v, omega, dt) = (odometry.v, odometry.omega, odometry.dt);
         if !(v.is_finite() && omega.is_finite() && dt.is_finite()) {
             return Err(GraphError::NotFinite("odometry"));
+        }
+        if !sideways.iter().all(|d| d.is_finite()) {
+            return Err(GraphError::NotFinite("slide"));
         }
         // The bounds every estimator applies (models::odometry_is_plausible), named one by one.
         if v.abs() > MAX_ODOM_SPEED {
@@ -274,11 +291,12 @@ impl PoseGraph {
             return Err(GraphError::OutOfRange("dt"));
         }
         let factor = OdometryFactor::new(&self.config.noise, v, omega, dt)
-            .ok_or(GraphError::DegenerateOdometry)?;
+            .ok_or(GraphError::DegenerateOdometry)?
+            .with_slide(sideways);
         let newest = self.problem.poses[self.problem.poses.len() - 1];
-        self.problem
-            .poses
-            .push(crate::models::unicycle_g(&newest, v, omega, dt));
+        let mut reached = crate::models::unicycle_g(&newest, v, omega, dt);
+        crate::models::add_slide(&mut reached, None, sideways);
+        self.problem.poses.push(reached);
         self.problem.odometry.push(factor);
         self.structure_changed = true;
         Ok(self.problem.poses.len() - 1)

@@ -66,6 +66,8 @@ type StampedPose = (u64, Vector3<f64>);
 struct StepRecord {
     /// The step's control; `None` for readings taken without a move since the last step.
     odom: Option<Odom>,
+    /// Its slide along a wall ([`crate::contact`]), robot frame at the arc's end.
+    slide: Vector2<f64>,
     n_readings: usize,
     /// The accepted readings, `id` = the front-end's landmark slot.
     readings: [BeaconReading; MAX_BEACONS],
@@ -197,6 +199,7 @@ impl GraphSlamEstimator {
             smoother: Some(smoother),
             record: StepRecord {
                 odom: None,
+                slide: Vector2::zeros(),
                 n_readings: 0,
                 readings: [BeaconReading::default(); MAX_BEACONS],
                 fix: None,
@@ -327,9 +330,15 @@ impl Estimator for GraphSlamEstimator {
 
     /// The front-end's prediction; the step before goes to the smoother and this one starts.
     fn predict(&mut self, odom: &Odom) {
-        self.front.predict(odom);
+        self.predict_sliding(odom, &Vector2::zeros());
+    }
+
+    /// The front-end's prediction with the slide, which the step's odometry factor carries too.
+    fn predict_sliding(&mut self, odom: &Odom, sideways: &Vector2<f64>) {
+        self.front.predict_sliding(odom, sideways);
         self.send_pending();
         self.record.odom = Some(*odom);
+        self.record.slide = *sideways;
         self.record.n_readings = 0;
         self.record.fix = None;
         self.pending = true;
@@ -507,7 +516,7 @@ fn smooth(
 fn add_step(graph: &mut PoseGraph, record: &StepRecord, ticks: &mut Vec<u64>) {
     let newest = graph.poses().len() - 1;
     let added = record.odom.and_then(|odom| {
-        let at = graph.add_pose(&odom).ok()?;
+        let at = graph.add_sliding_pose(&odom, &record.slide).ok()?;
         ticks.push(odom.header.tick);
         Some(at)
     });

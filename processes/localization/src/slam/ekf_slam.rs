@@ -6,7 +6,9 @@ use super::{
     SlotTable, Tally, checked_reading, inverse_range_bearing, observe,
 };
 use crate::kalman::symmetrize;
-use crate::models::{odometry_is_plausible, unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v};
+use crate::models::{
+    add_slide, sliding_is_plausible, unicycle_g, unicycle_jacobian_g, unicycle_jacobian_v,
+};
 use crate::noise::NoiseModel;
 use crate::slam::ci::argmin_on_unit_interval;
 use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, Pose2, wrap_angle};
@@ -293,7 +295,20 @@ impl<M: MotionModel> EkfSlam<M> {
     /// R_t, Σₓₘ ← G Σₓₘ; landmark blocks are untouched, so the cost is O(n). A non-finite or
     /// implausible control is ignored (and counted); dt = 0 changes nothing.
     pub fn predict(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), SlamError> {
-        if !odometry_is_plausible(v, omega, dt) {
+        self.predict_sliding(v, omega, dt, &Vector2::zeros())
+    }
+
+    /// [`EkfSlam::predict`] followed by the slide `sideways` the wheels did not see (robot frame
+    /// at the arc's end, [`crate::contact`]): the pose moves by R(θ̄)·b, and G_t turns it with θ
+    /// (the first-estimates G_t, built from the whole displacement, has it already).
+    pub fn predict_sliding(
+        &mut self,
+        v: f64,
+        omega: f64,
+        dt: f64,
+        sideways: &Vector2<f64>,
+    ) -> Result<(), SlamError> {
+        if !sliding_is_plausible(v, omega, dt, sideways) {
             self.tally.ignored += 1;
             return Err(SlamError::Invalid);
         }
@@ -301,12 +316,18 @@ impl<M: MotionModel> EkfSlam<M> {
             return Ok(());
         }
         let pose = self.pose_vector();
-        let moved = self.motion.g(&pose, v, omega, dt);
+        let mut moved = self.motion.g(&pose, v, omega, dt);
         let g_t = match self.linearisation {
-            Linearisation::Estimate => self.motion.jacobian_g(&pose, v, omega, dt),
-            Linearisation::FirstEstimates => self
-                .motion
-                .jacobian_g_first_estimates(&self.first_pose, &moved),
+            Linearisation::Estimate => {
+                let mut g_t = self.motion.jacobian_g(&pose, v, omega, dt);
+                add_slide(&mut moved, Some(&mut g_t), sideways);
+                g_t
+            }
+            Linearisation::FirstEstimates => {
+                add_slide(&mut moved, None, sideways);
+                self.motion
+                    .jacobian_g_first_estimates(&self.first_pose, &moved)
+            }
         };
         let r_t = self.motion.process_noise(&pose, v, omega, dt);
         if !(moved.iter().all(|v| v.is_finite())

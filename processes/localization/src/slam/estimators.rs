@@ -168,6 +168,13 @@ impl Estimator for EkfSlamEstimator {
         let _ = self.slam.predict(odom.v, odom.omega, odom.dt);
     }
 
+    fn predict_sliding(&mut self, odom: &Odom, sideways: &Vector2<f64>) {
+        // A refused control is counted inside.
+        let _ = self
+            .slam
+            .predict_sliding(odom.v, odom.omega, odom.dt, sideways);
+    }
+
     /// Every beacon reading in order (association, first sight or update), then the fix.
     fn correct(&mut self, readings: &Readings<'_>) {
         self.decisions.clear();
@@ -287,6 +294,13 @@ impl Estimator for FastSlamEstimator {
     fn predict(&mut self, odom: &Odom) {
         // A refused control is counted inside.
         let _ = self.slam.predict(odom.v, odom.omega, odom.dt);
+    }
+
+    fn predict_sliding(&mut self, odom: &Odom, sideways: &Vector2<f64>) {
+        // A refused control is counted inside.
+        let _ = self
+            .slam
+            .predict_sliding(odom.v, odom.omega, odom.dt, sideways);
     }
 
     /// Every beacon reading into every particle, the fix as a weight factor, then

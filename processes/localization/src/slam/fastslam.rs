@@ -15,7 +15,7 @@ use super::{
     SlotTable, Tally, checked_reading, inverse_range_bearing, observe,
 };
 use crate::kalman::kalman_correct;
-use crate::models::{odometry_is_plausible, unicycle_g, wrap_near};
+use crate::models::{add_slide, sliding_is_plausible, unicycle_g, wrap_near};
 use crate::noise::NoiseModel;
 use crate::pf::{low_variance_resample, normalise_log_weights};
 use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, MAX_LANDMARKS, Pose2, wrap_angle};
@@ -272,7 +272,19 @@ impl FastSlam {
     /// additive floor of the noise model. A non-finite or implausible control is ignored (and
     /// counted); dt = 0 changes nothing.
     pub fn predict(&mut self, v: f64, omega: f64, dt: f64) -> Result<(), SlamError> {
-        if !odometry_is_plausible(v, omega, dt) {
+        self.predict_sliding(v, omega, dt, &Vector2::zeros())
+    }
+
+    /// [`FastSlam::predict`] followed by the slide `sideways` the wheels did not see (robot
+    /// frame at the arc's end, [`crate::contact`]): each particle moves by R(θ_j)·b.
+    pub fn predict_sliding(
+        &mut self,
+        v: f64,
+        omega: f64,
+        dt: f64,
+        sideways: &Vector2<f64>,
+    ) -> Result<(), SlamError> {
+        if !sliding_is_plausible(v, omega, dt, sideways) {
             self.tally.ignored += 1;
             return Err(SlamError::Invalid);
         }
@@ -294,6 +306,7 @@ impl FastSlam {
                 moved[k] += floor_std[k] * gauss(&mut self.rng);
             }
             moved[2] = wrap_near(moved[2]);
+            add_slide(&mut moved, None, sideways);
             *pose = moved;
         }
         self.summarise();
