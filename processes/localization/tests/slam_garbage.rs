@@ -70,7 +70,7 @@ proptest! {
                 noise(),
                 6,
                 config(correspondence),
-                FastSlamConfig { n_particles: 30, seed: 1, ..FastSlamConfig::default() },
+                FastSlamConfig { n_particles: 30, islands: 3, seed: 1, ..FastSlamConfig::default() },
             );
             for op in &ops {
                 match op {

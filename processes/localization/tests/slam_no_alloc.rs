@@ -113,6 +113,8 @@ fn fastslam_steps_do_not_allocate() {
             config(correspondence),
             FastSlamConfig {
                 n_particles: 200,
+                // Four islands, so that resampling one leaves the others as they are.
+                islands: 4,
                 seed: 5,
                 // Resample whenever the weights are not uniform: every step that has readings.
                 resample_threshold: 1.0,

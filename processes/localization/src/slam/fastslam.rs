@@ -2,13 +2,16 @@
 //! pose and a small EKF (2-D mean, 2×2 covariance) per landmark, in arrays preallocated for
 //! `capacity` landmarks per particle and double-buffered for resampling.
 //!
-//! Known limitation: the map is over-confident on long runs. Resampling leaves the particles few
-//! ancestors (path degeneracy, Bailey, Nieto & Nebot, "Consistency of the FastSLAM algorithm",
-//! ICRA 2006), so the spread term of the mixture [`FastSlam::landmarks`] publishes vanishes for
-//! landmarks not seen since, and their Σ is one path's. Over 30 runs of scenarios/slam_loop.toml
-//! (100 Hz, 100 particles) the mean landmark NEES is about 1,500, where 2 is consistent, and
-//! more particles or another resampling threshold do not mend it; on the true path the same
-//! landmark EKFs give 1.99 (tests/slam_fastslam.rs).
+//! The particles are split into islands, independent filters that weigh and resample only their
+//! own particles, and the estimate is the islands' equal mixture (docs/algorithms.md §6.9.3).
+//! One filter's map is over-confident on long runs: resampling leaves its particles one ancestor
+//! (path degeneracy, Bailey, Nieto & Nebot, "Consistency of the FastSLAM algorithm", ICRA 2006),
+//! so the spread term of the mixture, the only place the path's uncertainty enters the map,
+//! vanishes and each landmark's Σ is one path's. Islands never share ancestors, so their spread
+//! stays (the island particle model of Vergé, Dubarry, Del Moral & Moulines, Statistics and
+//! Computing 2015, without the exchange between islands). On the ring of
+//! scenarios/slam_loop.toml (tests/slam_fastslam.rs) one filter of 100 particles has a mean
+//! landmark NEES of about 1,500 where 2 is consistent; 32 islands of 8 particles have 1.9.
 
 use super::{
     Association, AssociationStats, Correspondence, Gates, Landmark, SlamConfig, SlamError,
@@ -27,11 +30,22 @@ use rand_distr::StandardNormal;
 /// Mixed into the seed so FastSLAM's stream differs from the localiser PF's.
 const FASTSLAM_SEED_SALT: u64 = 0xFA57_51A3_0000_0013;
 
+/// Islands of the default configuration: the mixture's spread is estimated from this many
+/// independent maps, and NEES against a covariance estimated from K samples is inflated by about
+/// (K + 1)/(K − 4) (the mean of an inverse Wishart): 1.2 at 32.
+pub const DEFAULT_ISLANDS: usize = 32;
+/// Particles of the default configuration, 8 per island (on the ring, 2 per island track the
+/// pose at twice the error of 8, and 20 per island no better than 8).
+pub const DEFAULT_PARTICLES: usize = 256;
+
 /// Tuning of a [`FastSlam`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FastSlamConfig {
-    /// M, the number of particles (≥ 1).
+    /// M, the number of particles (≥ 1), rounded up to a multiple of `islands`.
     pub n_particles: usize,
+    /// K, the independent filters the particles are split into: each island weighs and
+    /// resamples its own particles only, and the estimate is their equal mixture.
+    pub islands: usize,
     /// Resample when N_eff < `resample_threshold` · M.
     pub resample_threshold: f64,
     /// Seed of the ChaCha stream that draws the motion noise and the resampling offsets.
@@ -41,7 +55,8 @@ pub struct FastSlamConfig {
 impl Default for FastSlamConfig {
     fn default() -> Self {
         Self {
-            n_particles: 100,
+            n_particles: DEFAULT_PARTICLES,
+            islands: DEFAULT_ISLANDS,
             resample_threshold: 0.5,
             seed: 0,
         }
@@ -80,11 +95,17 @@ pub struct FastSlam {
     config: SlamConfig,
     gates: Gates,
     resample_threshold: f64,
+    /// K islands of `per_island` particles each; island k holds particles k·per_island…
+    islands: usize,
+    per_island: usize,
+    /// N_eff of each island after the last correction.
+    island_n_eff: Vec<f64>,
     capacity: usize,
     set: Particles,
     next: Particles,
-    /// ln w, normalised after each correction.
+    /// ln w, normalised within each island after each correction.
     log_w: Vec<f64>,
+    /// The weights of the whole set: each island's normalised weights over K.
     w: Vec<f64>,
     picks: Vec<usize>,
     rng: ChaCha8Rng,
@@ -121,7 +142,9 @@ impl FastSlam {
         config: SlamConfig,
         fast: FastSlamConfig,
     ) -> Self {
-        let n = fast.n_particles.max(1);
+        let islands = fast.islands.max(1);
+        let per_island = fast.n_particles.max(1).div_ceil(islands);
+        let n = islands * per_island;
         let fin = |v: f64| if v.is_finite() { v } else { 0.0 };
         let start = Vector3::new(fin(pose.x), fin(pose.y), wrap_angle(fin(pose.theta)));
         let threshold = if fast.resample_threshold.is_finite() {
@@ -134,10 +157,13 @@ impl FastSlam {
             gates: Gates::new(&config),
             config,
             resample_threshold: threshold,
+            islands,
+            per_island,
+            island_n_eff: vec![per_island as f64; islands],
             capacity,
             set: Particles::new(n, capacity, start),
             next: Particles::new(n, capacity, start),
-            log_w: vec![-(n as f64).ln(); n],
+            log_w: vec![-(per_island as f64).ln(); n],
             w: vec![1.0 / n as f64; n],
             picks: vec![0; n],
             rng: ChaCha8Rng::seed_from_u64(fast.seed ^ FASTSLAM_SEED_SALT),
@@ -395,8 +421,9 @@ impl FastSlam {
     pub fn finish_correction(&mut self) {
         self.normalise();
         self.summarise();
-        if self.n_eff < self.resample_threshold * self.len() as f64 {
-            self.resample();
+        let low = self.resample_threshold * self.per_island as f64;
+        if self.island_n_eff.iter().any(|&n| n < low) {
+            self.resample(low);
         }
     }
 
@@ -578,18 +605,40 @@ impl FastSlam {
         best
     }
 
-    /// Normalises by log-sum-exp and computes N_eff = 1/Σw²; all-impossible sets (every ln w
-    /// −∞ or NaN) are reset to uniform.
+    /// Normalises each island by log-sum-exp and computes its N_eff = 1/Σw² (all-impossible
+    /// islands, every ln w −∞ or NaN, are reset to uniform); the set's weights are the
+    /// islands' over K, and the set's N_eff the sum of the islands'.
     fn normalise(&mut self) {
-        self.n_eff = normalise_log_weights(&mut self.log_w, &mut self.w);
+        let (per, k) = (self.per_island, self.islands as f64);
+        for (i, n_eff) in self.island_n_eff.iter_mut().enumerate() {
+            let r = i * per..(i + 1) * per;
+            *n_eff = normalise_log_weights(&mut self.log_w[r.clone()], &mut self.w[r.clone()]);
+            self.w[r].iter_mut().for_each(|w| *w /= k);
+        }
+        self.n_eff = self.island_n_eff.iter().sum();
     }
 
-    /// Low-variance resampling (Thrun Table 4.4, [`low_variance_resample`]) into the second
-    /// buffer, each particle's pose and landmark EKFs copied; weights become uniform.
-    fn resample(&mut self) {
-        let n = self.len();
-        let r = self.rng.random::<f64>() / n as f64;
-        low_variance_resample(&self.w, r, &mut self.picks);
+    /// Low-variance resampling (Thrun Table 4.4, [`low_variance_resample`]) of every island whose
+    /// N_eff is below `low`, within the island, into the second buffer (the other islands are
+    /// copied as they are), each particle's pose and landmark EKFs copied; a resampled island's
+    /// weights become uniform.
+    fn resample(&mut self, low: f64) {
+        let (per, k) = (self.per_island, self.islands);
+        for i in 0..k {
+            let r = i * per..(i + 1) * per;
+            if self.island_n_eff[i] >= low {
+                self.picks[r.clone()]
+                    .iter_mut()
+                    .zip(r)
+                    .for_each(|(p, m)| *p = m);
+                continue;
+            }
+            let offset = self.rng.random::<f64>() / per as f64;
+            low_variance_resample(&self.w[r.clone()], offset, &mut self.picks[r.clone()]);
+            self.picks[r.clone()].iter_mut().for_each(|p| *p += r.start);
+            self.log_w[r.clone()].fill(-(per as f64).ln());
+            self.w[r].fill(1.0 / (per * k) as f64);
+        }
         let cap = self.capacity;
         for (m, &i) in self.picks.iter().enumerate() {
             let k = self.set.count[i];
@@ -601,10 +650,8 @@ impl FastSlam {
             self.next.lm_id[dst].copy_from_slice(&self.set.lm_id[src]);
         }
         core::mem::swap(&mut self.set, &mut self.next);
-        // The best particle's first copy (it has one: its weight is at least 1/M).
+        // The best particle's first copy (it has one: its weight is the largest of its island's).
         self.best = self.picks.iter().position(|&i| i == self.best).unwrap_or(0);
-        self.log_w.fill(-(n as f64).ln());
-        self.w.fill(1.0 / n as f64);
         self.resamples += 1;
     }
 
@@ -693,6 +740,52 @@ mod tests {
             Matrix2::new(0.04 * 0.04, 0.0, 0.0, 0.01),
             epsilon = 1e-12
         );
+    }
+
+    /// Resampling stays within each island: every particle's ancestor is in its own island, and
+    /// an island whose weights stay uniform is left as it was.
+    #[test]
+    fn islands_resample_only_their_own_particles() {
+        let mut f = FastSlam::new(
+            Pose2::new(0.0, 0.0, 0.0),
+            NoiseModel::new(0.1, 0.05, 0.1, 0.02, 0.5),
+            3,
+            SlamConfig::default(),
+            FastSlamConfig {
+                n_particles: 40,
+                islands: 4,
+                resample_threshold: 1.0,
+                seed: 2,
+            },
+        );
+        assert_eq!((f.len(), f.per_island), (40, 10));
+        let mut resampled = 0;
+        for k in 0..30 {
+            f.predict(1.0, 0.1, 0.1).unwrap();
+            let before = f.resamples;
+            f.correct(&[reading(0, 5.0 - 0.1 * f64::from(k), 0.3)]);
+            if f.resamples > before {
+                resampled += 1;
+                for (m, &ancestor) in f.picks.iter().enumerate() {
+                    assert_eq!(
+                        ancestor / 10,
+                        m / 10,
+                        "step {k}: particle {m} from {ancestor}"
+                    );
+                }
+            }
+        }
+        assert!(resampled > 10, "resampled {resampled} times");
+        // Uniform weights within an island keep it as it is, whatever the others do.
+        let w = [0.1; 10];
+        f.w[..10].copy_from_slice(&w.map(|w| w / 4.0));
+        f.island_n_eff = vec![10.0, 1.0, 1.0, 1.0];
+        let first = f.set.pose[..10].to_vec();
+        f.resample(5.0);
+        assert_eq!(&f.picks[..10], &(0..10).collect::<Vec<_>>()[..]);
+        assert_eq!(&f.set.pose[..10], &first[..]);
+        // The set's weights sum to one over the islands.
+        approx::assert_relative_eq!(f.w.iter().sum::<f64>(), 1.0, epsilon = 1e-12);
     }
 
     #[test]

@@ -107,13 +107,16 @@ pub struct MapScore {
     pub nees: f64,
     /// How many landmarks that mean is over.
     pub nees_samples: usize,
+    /// The degrees of freedom ν the estimator published with its map (`Landmarks::nees_dof`).
+    pub nees_dof: f64,
 }
 
 impl MapScore {
-    /// Whether the mean NEES lies in [`mean_nees_interval`] of its landmark count.
-    pub fn nees_inside(&self) -> bool {
-        let (lo, hi) = mean_nees_interval(self.nees_samples);
-        (lo..=hi).contains(&self.nees)
+    /// Whether the mean NEES lies in the interval the monitor judges a map by, that of the
+    /// degrees of freedom the estimator published (docs/algorithms.md §6.9.6).
+    pub fn nees_inside_monitors_interval(&self) -> bool {
+        mole_monitor::mean_nees_interval_of_dof(self.nees_dof)
+            .is_some_and(|[lo, hi]| (lo..=hi).contains(&self.nees))
     }
 }
 
@@ -139,6 +142,7 @@ pub fn score_map(map: &Landmarks, beacons: &[(f64, f64)]) -> MapScore {
             f64::NAN
         },
         nees_samples: samples,
+        nees_dof: map.nees_dof,
     }
 }
 
