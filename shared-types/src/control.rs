@@ -27,8 +27,10 @@ pub const CONTROL_TEXT_LEN: usize = 1024;
 
 /// One request to the launcher.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.ControlRequest.v1")]
+#[layout(size = 72 + CONTROL_PATH_LEN + CONTROL_ARGV_LEN)]
+#[message(check = ControlRequest::check)]
 pub struct ControlRequest {
     pub header: Header,
     /// `CONTROL_SWAP`, `CONTROL_STOP`, `CONTROL_STATUS` or `CONTROL_FAULT`.
@@ -80,14 +82,9 @@ impl ControlRequest {
     }
 }
 
-impl Message for ControlRequest {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl ControlRequest {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if !matches!(
             self.op,
             CONTROL_SWAP | CONTROL_STOP | CONTROL_STATUS | CONTROL_FAULT
@@ -115,8 +112,10 @@ pub const CONTROL_FAILED: u32 = 2;
 
 /// The launcher's answer.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.ControlResponse.v1")]
+#[layout(size = 80 + CONTROL_TEXT_LEN)]
+#[message(check = ControlResponse::check)]
 pub struct ControlResponse {
     pub header: Header,
     /// `CONTROL_OK`, `CONTROL_REFUSED` or `CONTROL_FAILED`.
@@ -137,14 +136,9 @@ pub struct ControlResponse {
     pub text: [u8; CONTROL_TEXT_LEN],
 }
 
-impl Message for ControlResponse {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl ControlResponse {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.status > CONTROL_FAILED {
             return Err(Invalid::UnknownCode("status"));
         }

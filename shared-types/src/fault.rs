@@ -48,8 +48,10 @@ pub const FAULT_MAX_DELAY_MS: f64 = 10_000.0;
 
 /// `stack/faults`: one fault the launcher injected.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Fault.v1")]
+#[layout(size = 112)]
+#[message(check = Fault::check)]
 pub struct Fault {
     /// `tick`: the world's newest step when the fault was injected.
     pub header: Header,
@@ -87,14 +89,9 @@ impl Fault {
     }
 }
 
-impl Message for Fault {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Fault {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.fault_kind().is_none() {
             return Err(Invalid::UnknownCode("kind"));
         }

@@ -3,6 +3,7 @@
 //! The world frame: x to the right, y up, metres; the arena spans `[0, width] × [0, height]`.
 //! Headings are radians, counter-clockwise from +x, wrapped to `(-π, π]`.
 
+use crate::Layout;
 use bytemuck::{Pod, Zeroable};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -23,8 +24,9 @@ impl Pose2 {
 
 /// An axis-aligned square obstacle of side `side` centred at `(cx, cy)` (algorithms §1.3).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.Square.v1")]
+#[layout(size = 24)]
 pub struct Square {
     pub cx: f64,
     pub cy: f64,
@@ -52,8 +54,9 @@ impl Square {
 
 /// A beacon at a known position, seen by range and bearing.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.BeaconSite.v1")]
+#[layout(size = 24)]
 pub struct BeaconSite {
     pub x: f64,
     pub y: f64,
@@ -63,8 +66,9 @@ pub struct BeaconSite {
 
 /// One contact between the robot's rim and the world, in the world frame.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.Contact.v1")]
+#[layout(size = 40)]
 pub struct Contact {
     /// Contact point on the robot's rim (m).
     pub px: f64,

@@ -1,12 +1,11 @@
 //! The layout table: every message type's name, size, alignment and field offsets.
 //!
 //! `docs/messages.md` is generated from [`markdown`] and a test checks that it matches, so the
-//! document other languages code against cannot drift from the Rust types. Sizes are asserted at
-//! compile time below; `bytemuck::Pod` already refuses any implicit padding.
+//! document other languages code against cannot drift from the Rust types. Each type's entry,
+//! its size assertion and its no-padding assertion are derived (`#[derive(Message)]`,
+//! `#[derive(Layout)]`, crate mole-types-derive); `bytemuck::Pod` refuses implicit padding too.
 
 use crate::control::*;
-use crate::fault::Fault;
-use crate::geometry::*;
 use crate::messages::*;
 use core::mem::{align_of, offset_of, size_of};
 
@@ -47,89 +46,98 @@ fn short_type_name(full: &str) -> String {
     out
 }
 
-fn field<T, F>(name: &'static str, offset: usize, _project: fn(&T) -> &F) -> FieldLayout {
-    FieldLayout {
-        name,
-        offset,
-        size: size_of::<F>(),
-        ty: short_type_name(core::any::type_name::<F>()),
+impl FieldLayout {
+    /// A field of type `F` named `name` at `offset` (what `#[derive(Layout)]` lists).
+    pub fn of<F>(name: &'static str, offset: usize) -> FieldLayout {
+        FieldLayout {
+            name,
+            offset,
+            size: size_of::<F>(),
+            ty: short_type_name(core::any::type_name::<F>()),
+        }
     }
 }
 
-macro_rules! layout {
-    ($t:ident, $type_name:expr; $($f:ident),+ $(,)?) => {
+impl TypeLayout {
+    /// The layout of `T`, named `rust_name`, with `fields` (what `#[derive(Layout)]` writes).
+    pub fn of<T: iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend>(
+        rust_name: &'static str,
+        fields: Vec<FieldLayout>,
+    ) -> TypeLayout {
         TypeLayout {
-            rust_name: stringify!($t),
-            type_name: $type_name,
-            size: size_of::<$t>(),
-            align: align_of::<$t>(),
-            fields: vec![$(field::<$t, _>(stringify!($f), offset_of!($t, $f), |m: &$t| &m.$f)),+],
+            rust_name,
+            // SAFETY: `type_name` only returns the `#[type_name]` literal of the derive.
+            type_name: unsafe {
+                <T as iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend>::type_name()
+            },
+            size: size_of::<T>(),
+            align: align_of::<T>(),
+            fields,
         }
-    };
+    }
 }
 
-fn type_name<T: iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend>() -> &'static str {
-    // SAFETY: `type_name` only returns the `#[type_name]` literal of the derive.
-    unsafe { <T as iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend>::type_name() }
+/// A type that crosses a process boundary, with its entry in the layout table: derived by
+/// `#[derive(Message)]` and `#[derive(Layout)]`, never written by hand.
+pub trait Layout {
+    /// Its name, size, alignment and fields.
+    fn layout() -> TypeLayout;
+    /// Hands `visit` the layout of every struct its fields embed, depth first.
+    fn visit_embedded(visit: &mut dyn FnMut(TypeLayout));
 }
 
-/// Every type that crosses a process boundary: the messages, then the structs they embed.
+/// What a field's type adds to the layout table: an embedded struct its own entry (and those it
+/// embeds), an array its element's, a number nothing.
+pub trait FieldType {
+    /// Hands `visit` the layouts this field type brings.
+    fn visit(_visit: &mut dyn FnMut(TypeLayout)) {}
+}
+
+macro_rules! numbers {
+    ($($t:ty),+) => { $(impl FieldType for $t {})+ };
+}
+numbers!(u8, u16, u32, u64, i8, i16, i32, i64, f32, f64);
+
+impl<T: FieldType, const N: usize> FieldType for [T; N] {
+    fn visit(visit: &mut dyn FnMut(TypeLayout)) {
+        T::visit(visit);
+    }
+}
+
+/// Every type that crosses a process boundary: the message of each topic in the topic table's
+/// order, then the control service's request and response, then the structs they embed.
 pub fn all() -> Vec<TypeLayout> {
-    vec![
-        layout!(Header, type_name::<Header>(); seq, tick, stamp_ns, origin_ns),
-        layout!(WorldMap, type_name::<WorldMap>();
-            header, arena_width, arena_height, dt, seed, start_x, start_y, start_theta, goal_x,
-            goal_y, goal_tolerance, has_goal, n_obstacles, n_beacons, _pad, grid_resolution, robot,
-            sensors, obstacles, beacons),
-        layout!(Truth, type_name::<Truth>();
-            header, x, y, theta, v, omega, penetration, cmd_latency_ns, flags, end_reason,
-            n_contacts, _pad, contacts),
-        layout!(Scan, type_name::<Scan>(); header, angle_min, angle_increment, range_max, n_beams, ranges),
-        layout!(Tactile, type_name::<Tactile>(); header, n_sensors, radius, sensors),
-        layout!(Odom, type_name::<Odom>(); header, x, y, theta, v, omega, dt),
-        layout!(Beacons, type_name::<Beacons>(); header, n_readings, _pad, readings),
-        layout!(Fix, type_name::<Fix>(); header, x, y, std, valid, _pad),
-        layout!(Pose, type_name::<Pose>(); header, x, y, theta, covariance, odom, update_ns, estimator, _pad),
-        layout!(Particles, type_name::<Particles>(); header, n_particles, _pad, particles),
-        layout!(Landmarks, type_name::<Landmarks>(); header, n_landmarks, estimator, nees_dof, landmarks),
-        layout!(Trajectory, type_name::<Trajectory>(); header, first_tick, n_poses, estimator, poses),
-        layout!(Grid, type_name::<Grid>();
-            header, width, height, resolution, origin_x, origin_y, kind, _pad, cells),
-        layout!(Cmd, type_name::<Cmd>(); header, v, omega, mode, _pad),
-        layout!(PlanStatus, type_name::<PlanStatus>();
-            header, mode, flags, goal_x, goal_y, frontier_x, frontier_y, bounces, give_ups, n_path, _pad,
-            path),
-        layout!(Tick, type_name::<Tick>(); header, dt, flags, mode),
-        layout!(Stats, type_name::<Stats>();
-            header, process, pid, n_topics, cpu_ns, max_rss_bytes, steps, topics),
-        layout!(RunStatus, type_name::<RunStatus>();
-            header, coverage, loop_p50_us, loop_p99_us, max_penetration_m, rmse_m, finished),
-        layout!(Processes, type_name::<Processes>(); header, n_processes, _pad, processes),
-        layout!(Goal, type_name::<Goal>(); header, x, y, tolerance),
-        layout!(Pace, type_name::<Pace>(); header, op, steps),
-        layout!(Fault, type_name::<Fault>();
-            header, id, kind, target, start_ns, end_ns, delay_ns, fraction, seed),
-        layout!(RobotSpec, type_name::<RobotSpec>(); radius, max_speed, max_omega, max_accel, max_alpha),
-        layout!(SensorSpec, type_name::<SensorSpec>();
-            lidar_beams, tactile_sensors, lidar_range_max, lidar_fov, lidar_range_std,
-            tactile_stiffness, tactile_force_std, odom_v_std, odom_omega_std, beacon_range_max,
-            beacon_range_std, beacon_bearing_std, fix_std, fix_period_ticks, beacons_anonymous),
-        layout!(Square, type_name::<Square>(); cx, cy, side),
-        layout!(BeaconSite, type_name::<BeaconSite>(); x, y, id, _pad),
-        layout!(Contact, type_name::<Contact>(); px, py, nx, ny, depth),
-        layout!(TactileReading, type_name::<TactileReading>(); angle, fx, fy, _pad),
-        layout!(BeaconReading, type_name::<BeaconReading>(); id, _pad, range, bearing),
-        layout!(Particle, type_name::<Particle>(); x, y, theta, w),
-        layout!(Landmark, type_name::<Landmark>(); id, _pad, x, y, covariance),
-        layout!(TrajectoryPose, type_name::<TrajectoryPose>(); tick_offset, x, y, theta),
-        layout!(TopicStats, type_name::<TopicStats>();
-            topic, direction, _pad, count, dropped, invalid, rate_hz, latency_p50_us,
-            latency_p99_us, latency_max_us),
-        layout!(ProcessStatus, type_name::<ProcessStatus>(); role, pid, state, restarts, _pad),
-        layout!(ControlRequest, type_name::<ControlRequest>(); header, op, n_args, role, cwd, argv),
-        layout!(ControlResponse, type_name::<ControlResponse>();
-            header, status, pid, gap_ns, period_ns, steps_lost, steps_repeated, tick, text),
-    ]
+    struct Collect(Vec<TypeLayout>);
+    impl crate::topics::TopicVisitor for Collect {
+        fn visit<M: crate::Message>(&mut self, _constant: &'static str, _: crate::Topic<M>) {
+            self.0.push(M::layout());
+        }
+    }
+    let mut messages = Collect(Vec::new());
+    crate::topics::for_each(&mut messages);
+    messages.0.push(ControlRequest::layout());
+    messages.0.push(ControlResponse::layout());
+    let mut embedded = Vec::new();
+    let mut collect = |t: TypeLayout| embedded.push(t);
+    crate::topics::for_each(&mut Embedded(&mut collect));
+    ControlRequest::visit_embedded(&mut collect);
+    ControlResponse::visit_embedded(&mut collect);
+    let mut out: Vec<TypeLayout> = Vec::new();
+    for t in messages.0.into_iter().chain(embedded) {
+        if !out.iter().any(|o| o.rust_name == t.rust_name) {
+            out.push(t);
+        }
+    }
+    out
+}
+
+/// Hands every embedded struct of each topic's message to a closure.
+struct Embedded<'a>(&'a mut dyn FnMut(TypeLayout));
+
+impl crate::topics::TopicVisitor for Embedded<'_> {
+    fn visit<M: crate::Message>(&mut self, _constant: &'static str, _: crate::Topic<M>) {
+        M::visit_embedded(self.0);
+    }
 }
 
 /// The layout table as Markdown: the text of `docs/messages.md`.
@@ -476,40 +484,9 @@ class Topic(NamedTuple):
     s
 }
 
-// Compile-time size assertions: a layout change must be deliberate (bump the type_name version).
+// Offsets other languages rely on; the sizes are asserted where each type is declared
+// (`#[layout(size = …)]`).
 const _: () = {
-    assert!(size_of::<Header>() == 32);
-    assert!(size_of::<RobotSpec>() == 40);
-    assert!(size_of::<SensorSpec>() == 104);
-    assert!(size_of::<Square>() == 24);
-    assert!(size_of::<BeaconSite>() == 24);
-    assert!(size_of::<Contact>() == 40);
-    assert!(size_of::<WorldMap>() == 280 + 24 * MAX_OBSTACLES + 24 * MAX_BEACONS);
-    assert!(size_of::<Truth>() == 104 + 40 * MAX_CONTACTS);
-    assert!(size_of::<Scan>() == 48 + 4 * MAX_BEAMS);
-    assert!(size_of::<Tactile>() == 40 + 16 * MAX_TACTILE);
-    assert!(size_of::<Odom>() == 80);
-    assert!(size_of::<Beacons>() == 40 + 24 * MAX_BEACONS);
-    assert!(size_of::<Fix>() == 64);
-    assert!(size_of::<Pose>() == 168);
-    assert!(size_of::<Particles>() == 40 + 16 * MAX_PARTICLES);
-    assert!(size_of::<Landmark>() == 56);
-    assert!(size_of::<Landmarks>() == 48 + 56 * MAX_LANDMARKS);
-    assert!(size_of::<TrajectoryPose>() == 16);
-    assert!(size_of::<Trajectory>() == 48 + 16 * MAX_TRAJECTORY_POSES);
-    assert!(size_of::<Grid>() == 72 + MAX_GRID_CELLS);
-    assert!(size_of::<Cmd>() == 56);
-    assert!(size_of::<PlanStatus>() == 88 + 8 * MAX_PATH);
-    assert!(size_of::<Tick>() == 48);
-    assert!(size_of::<TopicStats>() == 80);
-    assert!(size_of::<Stats>() == 96 + 80 * MAX_TOPIC_STATS);
-    assert!(size_of::<RunStatus>() == 56);
-    assert!(size_of::<ProcessStatus>() == 48);
-    assert!(size_of::<Processes>() == 40 + 48 * MAX_PROCESSES);
-    assert!(size_of::<Goal>() == 56);
-    assert!(size_of::<Pace>() == 40);
-    assert!(size_of::<ControlRequest>() == 72 + CONTROL_PATH_LEN + CONTROL_ARGV_LEN);
-    assert!(size_of::<ControlResponse>() == 80 + CONTROL_TEXT_LEN);
     assert!(offset_of!(WorldMap, header) == 0);
     assert!(offset_of!(Grid, cells) == 72);
     assert!(offset_of!(Scan, ranges) == 48);

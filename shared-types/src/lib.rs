@@ -6,6 +6,9 @@
 //! hostile publisher cannot cause undefined behaviour; `validate()` then says whether the values
 //! make sense, and a process drops (and counts) whatever does not.
 
+// The derives name `::mole_types`, this crate too.
+extern crate self as mole_types;
+
 pub mod control;
 pub mod env;
 pub mod geometry;
@@ -25,6 +28,7 @@ pub use geometry::*;
 pub use graph::{GRAPH, Role, RoleSpec};
 pub use kinds::{ClockMode, EndReason, EstimatorKind, PlannerKind, UnknownChoice};
 pub use messages::*;
+pub use mole_types_derive::{Layout, Message};
 pub use topics::Topic;
 
 /// Why a received message was refused.
@@ -58,8 +62,89 @@ impl std::error::Error for Invalid {}
 /// # Safety contract (checked by the bounds)
 /// `Pod` guarantees every bit pattern is a valid value; `ZeroCopySend` with `#[repr(C)]` lets
 /// iceoryx2 place the type in shared memory.
+///
+/// Derived, never written by hand: `#[derive(Message)]` (mole-types-derive) gives the header
+/// accessors, `validate` from `#[message(check = …)]` and the entry in the layout table. A new
+/// message is one struct:
+///
+/// ```
+/// use bytemuck::{Pod, Zeroable};
+/// use iceoryx2_bb_derive_macros::ZeroCopySend;
+/// use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+/// use mole_types::{Header, Invalid, Message, layout::Layout};
+///
+/// #[repr(C)]
+/// #[derive(Debug, Clone, Copy, Pod, Zeroable, ZeroCopySend, Message)]
+/// #[type_name("mole.Bump.v1")]
+/// #[layout(size = 48)]
+/// #[message(check = Bump::check)]
+/// pub struct Bump {
+///     pub header: Header,
+///     pub force: f64,
+///     pub sensor: u32,
+///     pub _pad: u32,
+/// }
+///
+/// impl Bump {
+///     fn check(&self) -> Result<(), Invalid> {
+///         mole_types::finite("force", self.force)
+///     }
+/// }
+///
+/// let mut bump: Bump = bytemuck::Zeroable::zeroed();
+/// bump.header_mut().tick = 7;
+/// assert_eq!(bump.header().tick, 7);
+/// assert!(bump.validate().is_ok());
+/// bump.force = f64::NAN;
+/// assert_eq!(bump.validate(), Err(Invalid::NotFinite("force")));
+/// let layout = Bump::layout();
+/// assert_eq!((layout.type_name, layout.size, layout.fields.len()), ("mole.Bump.v1", 48, 4));
+/// assert_eq!(layout.fields[2].offset, 40);
+/// ```
+///
+/// The derive refuses a size other than the one declared (a layout change must be deliberate)…
+///
+/// ```compile_fail,E0080
+/// # use bytemuck::{Pod, Zeroable};
+/// # use iceoryx2_bb_derive_macros::ZeroCopySend;
+/// # use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+/// # use mole_types::{Header, Message};
+/// #[repr(C)]
+/// #[derive(Debug, Clone, Copy, Pod, Zeroable, ZeroCopySend, Message)]
+/// #[type_name("mole.Bump.v1")]
+/// #[layout(size = 40)]
+/// pub struct Bump { pub header: Header, pub force: f64, pub sensor: u32, pub _pad: u32 }
+/// ```
+///
+/// …a message without a declared size, or without its header:
+///
+/// ```compile_fail
+/// # use bytemuck::{Pod, Zeroable};
+/// # use iceoryx2_bb_derive_macros::ZeroCopySend;
+/// # use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+/// # use mole_types::{Header, Message};
+/// #[repr(C)]
+/// #[derive(Debug, Clone, Copy, Pod, Zeroable, ZeroCopySend, Message)]
+/// #[type_name("mole.Bump.v1")]
+/// pub struct Bump { pub header: Header, pub force: f64, pub sensor: u32, pub _pad: u32 }
+/// ```
+///
+/// ```compile_fail
+/// # use bytemuck::{Pod, Zeroable};
+/// # use iceoryx2_bb_derive_macros::ZeroCopySend;
+/// # use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+/// # use mole_types::Message;
+/// #[repr(C)]
+/// #[derive(Debug, Clone, Copy, Pod, Zeroable, ZeroCopySend, Message)]
+/// #[type_name("mole.Bump.v1")]
+/// #[layout(size = 16)]
+/// pub struct Bump { pub force: f64, pub sensor: u32, pub _pad: u32 }
+/// ```
 pub trait Message:
-    bytemuck::Pod + iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend + core::fmt::Debug
+    bytemuck::Pod
+    + iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend
+    + core::fmt::Debug
+    + layout::Layout
 {
     /// The versioned name every language must agree on, e.g. `mole.Scan.v1`: the one written
     /// in the type's `#[type_name("...")]` attribute.

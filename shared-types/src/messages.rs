@@ -2,7 +2,7 @@
 //! live summary). Capacities are fixed; counts say how much of an array is in use.
 
 use crate::geometry::{BeaconSite, Contact, Square};
-use crate::{Invalid, Message, all_finite, finite, within};
+use crate::{Invalid, Layout, Message, all_finite, finite, within};
 use bytemuck::{Pod, Zeroable};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -33,8 +33,9 @@ pub const NAME_LEN: usize = 32;
 
 /// The header every message starts with.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.Header.v1")]
+#[layout(size = 32)]
 pub struct Header {
     /// Per-publisher sequence number, starting at 0.
     pub seq: u64,
@@ -52,8 +53,9 @@ pub struct Header {
 
 /// Robot body and motion limits.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.RobotSpec.v1")]
+#[layout(size = 40)]
 pub struct RobotSpec {
     /// Disk radius r (m).
     pub radius: f64,
@@ -69,8 +71,9 @@ pub struct RobotSpec {
 
 /// Sensor parameters and noise, as the world's scenario sets them.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.SensorSpec.v1")]
+#[layout(size = 104)]
 pub struct SensorSpec {
     /// Lidar beams per scan (0: no lidar, as in the dark room).
     pub lidar_beams: u32,
@@ -102,8 +105,10 @@ pub struct SensorSpec {
 
 /// `world/map`: everything static about the world, published once with history 1.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.WorldMap.v1")]
+#[layout(size = 280 + 24 * MAX_OBSTACLES + 24 * MAX_BEACONS)]
+#[message(check = WorldMap::check)]
 pub struct WorldMap {
     pub header: Header,
     /// Arena `[0, width] × [0, height]` (m).
@@ -142,14 +147,9 @@ impl WorldMap {
     }
 }
 
-impl Message for WorldMap {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl WorldMap {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_obstacles", self.n_obstacles, MAX_OBSTACLES)?;
         within("n_beacons", self.n_beacons, MAX_BEACONS)?;
         within("sensors.lidar_beams", self.sensors.lidar_beams, MAX_BEAMS)?;
@@ -233,8 +233,10 @@ pub const END_NONE: u32 = 0;
 
 /// `world/truth`: the true state after step `tick`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Truth.v1")]
+#[layout(size = 104 + 40 * MAX_CONTACTS)]
+#[message(check = Truth::check)]
 pub struct Truth {
     pub header: Header,
     pub x: f64,
@@ -263,14 +265,9 @@ impl Truth {
     }
 }
 
-impl Message for Truth {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Truth {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_contacts", self.n_contacts, MAX_CONTACTS)?;
         if self.flags & !TRUTH_FLAGS != 0 {
             return Err(Invalid::UnknownCode("flags"));
@@ -304,8 +301,10 @@ impl Message for Truth {
 /// `angle_min + i·angle_increment` relative to the heading. A beam that hits nothing reads
 /// `range_max`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Scan.v1")]
+#[layout(size = 48 + 4 * MAX_BEAMS)]
+#[message(check = Scan::check)]
 pub struct Scan {
     pub header: Header,
     pub angle_min: f32,
@@ -321,14 +320,9 @@ impl Scan {
     }
 }
 
-impl Message for Scan {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Scan {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_beams", self.n_beams, MAX_BEAMS)?;
         all_finite(
             "angle_min/angle_increment/range_max",
@@ -346,8 +340,9 @@ impl Message for Scan {
 
 /// One tactile sensor's reading.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.TactileReading.v1")]
+#[layout(size = 16)]
 pub struct TactileReading {
     /// Where the sensor sits on the rim, robot frame (rad from the heading).
     pub angle: f32,
@@ -359,8 +354,10 @@ pub struct TactileReading {
 
 /// `sensing/tactile`: k force vectors around the rim (algorithms §2.2's f_net).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Tactile.v1")]
+#[layout(size = 40 + 16 * MAX_TACTILE)]
+#[message(check = Tactile::check)]
 pub struct Tactile {
     pub header: Header,
     pub n_sensors: u32,
@@ -375,14 +372,9 @@ impl Tactile {
     }
 }
 
-impl Message for Tactile {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Tactile {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_sensors", self.n_sensors, MAX_TACTILE)?;
         finite("radius", self.radius as f64)?;
         for s in self.sensors() {
@@ -397,8 +389,10 @@ impl Message for Tactile {
 /// robot started); `v, omega`: the velocities measured over the last `dt`. A reader that missed
 /// steps takes the motion between two odometry poses, which nothing lost.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Odom.v2")]
+#[layout(size = 80)]
+#[message(check = Odom::check)]
 pub struct Odom {
     pub header: Header,
     pub x: f64,
@@ -409,14 +403,9 @@ pub struct Odom {
     pub dt: f64,
 }
 
-impl Message for Odom {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Odom {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         all_finite("x/y/theta", &[self.x, self.y, self.theta])?;
         all_finite("v/omega/dt", &[self.v, self.omega, self.dt])?;
         if self.dt < 0.0 {
@@ -428,8 +417,9 @@ impl Message for Odom {
 
 /// One beacon sighting, robot frame.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.BeaconReading.v1")]
+#[layout(size = 24)]
 pub struct BeaconReading {
     /// The beacon's id in `WorldMap::beacons`.
     pub id: u32,
@@ -441,8 +431,10 @@ pub struct BeaconReading {
 
 /// `sensing/beacons`: range and bearing to every beacon within range.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Beacons.v1")]
+#[layout(size = 40 + 24 * MAX_BEACONS)]
+#[message(check = Beacons::check)]
 pub struct Beacons {
     pub header: Header,
     pub n_readings: u32,
@@ -456,14 +448,9 @@ impl Beacons {
     }
 }
 
-impl Message for Beacons {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Beacons {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_readings", self.n_readings, MAX_BEACONS)?;
         for r in self.readings() {
             all_finite("readings", &[r.range, r.bearing])?;
@@ -481,8 +468,10 @@ impl Message for Beacons {
 
 /// `sensing/fix`: a noisy absolute position (GPS-like), valid when `valid == 1`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Fix.v1")]
+#[layout(size = 64)]
+#[message(check = Fix::check)]
 pub struct Fix {
     pub header: Header,
     pub x: f64,
@@ -493,14 +482,9 @@ pub struct Fix {
     pub _pad: u32,
 }
 
-impl Message for Fix {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Fix {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.valid > 1 {
             return Err(Invalid::UnknownCode("valid"));
         }
@@ -518,8 +502,10 @@ impl Message for Fix {
 
 /// `localization/pose`: the estimate (μ, Σ) after step `tick`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Pose.v2")]
+#[layout(size = 168)]
+#[message(check = Pose::check)]
 pub struct Pose {
     pub header: Header,
     pub x: f64,
@@ -537,14 +523,9 @@ pub struct Pose {
     pub _pad: u32,
 }
 
-impl Message for Pose {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Pose {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if crate::EstimatorKind::from_code(self.estimator).is_none() {
             return Err(Invalid::UnknownCode("estimator"));
         }
@@ -557,8 +538,9 @@ impl Message for Pose {
 
 /// One weighted particle.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.Particle.v1")]
+#[layout(size = 16)]
 pub struct Particle {
     pub x: f32,
     pub y: f32,
@@ -569,8 +551,10 @@ pub struct Particle {
 
 /// `localization/particles`: the particle set Ψ (algorithms §6.7), when the PF runs.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Particles.v1")]
+#[layout(size = 40 + 16 * MAX_PARTICLES)]
+#[message(check = Particles::check)]
 pub struct Particles {
     pub header: Header,
     pub n_particles: u32,
@@ -584,14 +568,9 @@ impl Particles {
     }
 }
 
-impl Message for Particles {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Particles {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_particles", self.n_particles, MAX_PARTICLES)?;
         for p in self.particles() {
             all_finite("particles", &[p.x, p.y, p.theta, p.w])?;
@@ -605,8 +584,9 @@ pub const LANDMARK_ANONYMOUS: u32 = u32::MAX;
 
 /// One estimated landmark: its mean and 2×2 covariance in the world frame.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.Landmark.v1")]
+#[layout(size = 56)]
 pub struct Landmark {
     /// The beacon id it was created from, or `LANDMARK_ANONYMOUS`.
     pub id: u32,
@@ -620,8 +600,10 @@ pub struct Landmark {
 /// `localization/landmarks`: a SLAM estimator's map of the beacons (algorithms §6.9) after step
 /// `tick`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Landmarks.v2")]
+#[layout(size = 48 + 56 * MAX_LANDMARKS)]
+#[message(check = Landmarks::check)]
 pub struct Landmarks {
     pub header: Header,
     pub n_landmarks: u32,
@@ -640,14 +622,9 @@ impl Landmarks {
     }
 }
 
-impl Message for Landmarks {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Landmarks {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_landmarks", self.n_landmarks, MAX_LANDMARKS)?;
         if crate::EstimatorKind::from_code(self.estimator).is_none() {
             return Err(Invalid::UnknownCode("estimator"));
@@ -674,8 +651,9 @@ pub const MAX_TRAJECTORY_POSES: usize = 20_000;
 /// One pose of a smoothed trajectory, in single precision (a few µm over any arena a grid
 /// message holds), which halves the message.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.TrajectoryPose.v1")]
+#[layout(size = 16)]
 pub struct TrajectoryPose {
     /// Steps after `Trajectory::first_tick`: the pose is the state after that step.
     pub tick_offset: u32,
@@ -688,8 +666,10 @@ pub struct TrajectoryPose {
 /// published after each finished solve. Pose i estimates the state after step
 /// `first_tick + poses[i].tick_offset`; the offsets increase strictly.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Trajectory.v1")]
+#[layout(size = 48 + 16 * MAX_TRAJECTORY_POSES)]
+#[message(check = Trajectory::check)]
 pub struct Trajectory {
     pub header: Header,
     /// The step the offsets count from.
@@ -706,14 +686,9 @@ impl Trajectory {
     }
 }
 
-impl Message for Trajectory {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Trajectory {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_poses", self.n_poses, MAX_TRAJECTORY_POSES)?;
         if crate::EstimatorKind::from_code(self.estimator).is_none() {
             return Err(Invalid::UnknownCode("estimator"));
@@ -752,8 +727,10 @@ pub const CELL_OCCUPIED: u8 = 2;
 /// `mapping/grid` and `mapping/contact`: a row-major grid; cell (col, row) covers
 /// `[origin_x + col·res, origin_x + (col+1)·res) × [origin_y + row·res, …)`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Grid.v1")]
+#[layout(size = 72 + MAX_GRID_CELLS)]
+#[message(check = Grid::check)]
 pub struct Grid {
     pub header: Header,
     pub width: u32,
@@ -773,14 +750,9 @@ impl Grid {
     }
 }
 
-impl Message for Grid {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Grid {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if (self.width as u64) * (self.height as u64) > MAX_GRID_CELLS as u64 {
             return Err(Invalid::CountAboveCapacity("width×height"));
         }
@@ -823,8 +795,10 @@ const MODE_LAST: u32 = MODE_ARRIVED;
 
 /// `planning/cmd`: the velocity command (v, ω) for the next step.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Cmd.v1")]
+#[layout(size = 56)]
+#[message(check = Cmd::check)]
 pub struct Cmd {
     pub header: Header,
     pub v: f64,
@@ -833,14 +807,9 @@ pub struct Cmd {
     pub _pad: u32,
 }
 
-impl Message for Cmd {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Cmd {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.mode > MODE_LAST {
             return Err(Invalid::UnknownCode("mode"));
         }
@@ -858,8 +827,10 @@ const STATUS_FLAGS: u32 = STATUS_HAS_GOAL | STATUS_HAS_FRONTIER | STATUS_EXPLORA
 
 /// `planning/status`: what the planner is doing and why.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.PlanStatus.v2")]
+#[layout(size = 88 + 8 * MAX_PATH)]
+#[message(check = PlanStatus::check)]
 pub struct PlanStatus {
     pub header: Header,
     pub mode: u32,
@@ -884,14 +855,9 @@ impl PlanStatus {
     }
 }
 
-impl Message for PlanStatus {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl PlanStatus {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.mode > MODE_LAST {
             return Err(Invalid::UnknownCode("mode"));
         }
@@ -916,8 +882,10 @@ impl Message for PlanStatus {
 
 /// `operator/goal`: where an operator (the view) wants a goal-seeking planner to go.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Goal.v1")]
+#[layout(size = 56)]
+#[message(check = Goal::check)]
 pub struct Goal {
     pub header: Header,
     /// Goal position (m), world frame.
@@ -927,14 +895,9 @@ pub struct Goal {
     pub tolerance: f64,
 }
 
-impl Message for Goal {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Goal {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         all_finite("x/y/tolerance", &[self.x, self.y, self.tolerance])?;
         if self.tolerance < 0.0 {
             return Err(Invalid::OutOfRange("tolerance"));
@@ -954,8 +917,10 @@ pub const PACE_MAX_STEPS: u32 = 100_000;
 
 /// `operator/pace`: pause, resume or single-step a lockstep run.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Pace.v1")]
+#[layout(size = 40)]
+#[message(check = Pace::check)]
 pub struct Pace {
     pub header: Header,
     /// PACE_RUN, PACE_PAUSE or PACE_STEP.
@@ -964,14 +929,9 @@ pub struct Pace {
     pub steps: u32,
 }
 
-impl Message for Pace {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Pace {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         match self.op {
             PACE_RUN | PACE_PAUSE if self.steps == 0 => Ok(()),
             PACE_RUN | PACE_PAUSE => Err(Invalid::OutOfRange("steps")),
@@ -991,8 +951,10 @@ pub const TICK_END: u32 = 1;
 
 /// `stack/tick`: the world's clock; step `header.tick` starts now.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Tick.v1")]
+#[layout(size = 48)]
+#[message(check = Tick::check)]
 pub struct Tick {
     pub header: Header,
     pub dt: f64,
@@ -1001,14 +963,9 @@ pub struct Tick {
     pub mode: u32,
 }
 
-impl Message for Tick {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Tick {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.flags & !TICK_END != 0 {
             return Err(Invalid::UnknownCode("flags"));
         }
@@ -1025,8 +982,9 @@ pub const DIRECTION_PUBLISH: u32 = 1;
 
 /// One port's counters over the process's lifetime, and its rate and latency over the last window.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.TopicStats.v1")]
+#[layout(size = 80)]
 pub struct TopicStats {
     /// Topic name without the namespace, NUL-padded, e.g. `sensing/scan`.
     pub topic: [u8; NAME_LEN],
@@ -1048,8 +1006,10 @@ pub struct TopicStats {
 
 /// `stack/stats`: one process's statistics, once a second.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Stats.v1")]
+#[layout(size = 96 + 80 * MAX_TOPIC_STATS)]
+#[message(check = Stats::check)]
 pub struct Stats {
     pub header: Header,
     /// Role name, NUL-padded, e.g. `sensing`.
@@ -1071,14 +1031,9 @@ impl Stats {
     }
 }
 
-impl Message for Stats {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Stats {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_topics", self.n_topics, MAX_TOPIC_STATS)?;
         for t in self.topics() {
             if t.direction > DIRECTION_PUBLISH {
@@ -1110,8 +1065,9 @@ pub const PROCESS_FAILED: u32 = 4;
 
 /// One supervised process, as the launcher sees it.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]
 #[type_name("mole.ProcessStatus.v1")]
+#[layout(size = 48)]
 pub struct ProcessStatus {
     /// Role name, NUL-padded.
     pub role: [u8; NAME_LEN],
@@ -1123,8 +1079,10 @@ pub struct ProcessStatus {
 
 /// `stack/processes`: the launcher's view of every process, once a second.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.Processes.v1")]
+#[layout(size = 40 + 48 * MAX_PROCESSES)]
+#[message(check = Processes::check)]
 pub struct Processes {
     pub header: Header,
     pub n_processes: u32,
@@ -1138,14 +1096,9 @@ impl Processes {
     }
 }
 
-impl Message for Processes {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl Processes {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         within("n_processes", self.n_processes, MAX_PROCESSES)?;
         if self.processes().iter().any(|p| p.state > PROCESS_FAILED) {
             return Err(Invalid::UnknownCode("processes.state"));
@@ -1156,8 +1109,10 @@ impl Message for Processes {
 
 /// `monitor/status`: the monitor's live view of the run, for progress bars and `mole top`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.RunStatus.v1")]
+#[layout(size = 56)]
+#[message(check = RunStatus::check)]
 pub struct RunStatus {
     pub header: Header,
     /// Coverage of the reachable free area (0..1).
@@ -1171,14 +1126,9 @@ pub struct RunStatus {
     pub finished: u32,
 }
 
-impl Message for RunStatus {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl RunStatus {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.finished > 1 {
             return Err(Invalid::UnknownCode("finished"));
         }

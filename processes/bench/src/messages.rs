@@ -25,14 +25,14 @@ macro_rules! bench_message {
     ($name:ident, $size:expr, $type_name:tt) => {
         #[doc = concat!("A ", stringify!($size), "-byte benchmark message (`", $type_name, "`).")]
         #[repr(C)]
-        #[derive(Clone, Copy, Pod, Zeroable, ZeroCopySend)]
+        #[derive(Clone, Copy, Pod, Zeroable, ZeroCopySend, Message)]
         #[type_name($type_name)]
+        #[layout(size = $size)]
         pub struct $name {
             pub header: Header,
+            /// Every byte pattern of a payload is meaningful.
             pub payload: [u8; $size - HEADER_BYTES],
         }
-
-        const _: () = assert!(core::mem::size_of::<$name>() == $size);
 
         // A derived Debug would print megabytes; the size and header say enough.
         impl core::fmt::Debug for $name {
@@ -41,19 +41,6 @@ macro_rules! bench_message {
                     .field("header", &self.header)
                     .field("payload_bytes", &self.payload.len())
                     .finish()
-            }
-        }
-
-        impl Message for $name {
-            fn header(&self) -> &Header {
-                &self.header
-            }
-            fn header_mut(&mut self) -> &mut Header {
-                &mut self.header
-            }
-            /// Every byte pattern of a payload is meaningful.
-            fn validate(&self) -> Result<(), Invalid> {
-                Ok(())
             }
         }
 
@@ -111,8 +98,10 @@ pub(crate) use with_message_type;
 /// What a probe sends back: the receipt of one message (latency, fan-out) or the totals of a
 /// throughput run. Also the socket transports' 80-byte ack frame.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Pod, Zeroable, ZeroCopySend, Message)]
 #[type_name("mole.BenchAck.v1")]
+#[layout(size = 80)]
+#[message(check = BenchAck::check)]
 pub struct BenchAck {
     pub header: Header,
     /// Sequence number of the acknowledged message.
@@ -130,8 +119,6 @@ pub struct BenchAck {
     pub _pad: u32,
 }
 
-const _: () = assert!(core::mem::size_of::<BenchAck>() == 80);
-
 impl BenchAck {
     /// Copies everything but the header (the publisher stamps that).
     pub fn copy_body_into(&self, dst: &mut BenchAck) {
@@ -145,14 +132,9 @@ impl BenchAck {
     }
 }
 
-impl Message for BenchAck {
-    fn header(&self) -> &Header {
-        &self.header
-    }
-    fn header_mut(&mut self) -> &mut Header {
-        &mut self.header
-    }
-    fn validate(&self) -> Result<(), Invalid> {
+impl BenchAck {
+    /// A throughput total ends after it starts (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
         if self.recv_ns < self.first_ns {
             return Err(Invalid::OutOfRange("recv_ns"));
         }
