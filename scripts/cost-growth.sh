@@ -105,10 +105,9 @@ for side in 10 20 30 40; do
     measure grid "$side" "$(launch_with_observers 0)" "$(scaled_scenario "$side")"
 done
 for n in 1000 3000 10000 30000 100000; do
-    export MOLE_PARTICLES=$n  # mole-localization --particles, through the launcher
-    measure particles "$n" "$(launch_with_observers 0)" "$default_scenario" --estimator pf
+    measure particles "$n" "$(launch_with_observers 0)" "$default_scenario" --estimator pf \
+        --set "localization.pf.n_particles=$n"
 done
-unset MOLE_PARTICLES
 echo "load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
 
 "$bin/mole-plot" --points "$points" --json "$out/cost.json" --img-dir "$img"

@@ -303,6 +303,7 @@ const SLICE: &[&str] = &[
     "cellular/dwa-navigate.json",
     "corridors/dwa-navigate.json",
     "rooms-dark/estimator-ekf-slam.json",
+    "rooms/estimator-fastslam.json",
 ];
 const SLICE_WORLDS: &str = "2";
 

@@ -401,6 +401,7 @@ fn other_user_probe() {
             seed: None,
             takeover: false,
             resume: None,
+            settings: None,
         };
         let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         Context::with_shutdown_flag("intruder", &args, shutdown)

@@ -7,78 +7,13 @@ use mole_integration_tests::*;
 use mole_types::{Role, topics};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::process::Output;
+use std::time::Duration;
 
 const RUN_TIMEOUT: Duration = Duration::from_secs(300);
 /// Lockstep steps of the recorded run: in the dark room (touch alone, no lidar) with seed 1 the
 /// robot first presses on an obstacle hard enough to mark the grids at tick 2,080.
 const TICKS: &str = "3000";
-
-/// A running `mole replay`; on drop (a failed test included) it and every process of its
-/// namespace are stopped.
-struct Replay {
-    namespace: String,
-    out: PathBuf,
-    child: Option<Child>,
-}
-
-impl Replay {
-    /// `mole replay FILE` with `args` in a fresh namespace, its output under `dir`; `env` is
-    /// added to its environment (and so to every process it starts).
-    fn start(dir: &Path, file: &Path, args: &[&str], env: &[(&str, &str)]) -> Replay {
-        let namespace = unique_namespace("replay");
-        let out = dir.join(&namespace);
-        let child = Command::new(bin_dir().join("mole"))
-            .current_dir(workspace())
-            .env_remove("CARGO")
-            .env_remove("CARGO_MANIFEST_DIR")
-            .envs(env.iter().copied())
-            .arg("replay")
-            .arg(file)
-            .args(args)
-            .args(["--namespace", &namespace, "--quiet", "--out"])
-            .arg(&out)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start mole replay");
-        Replay {
-            namespace,
-            out,
-            child: Some(child),
-        }
-    }
-
-    /// Waits for `mole replay` to exit (killing it after [`RUN_TIMEOUT`]); nothing of its
-    /// namespace may be left running.
-    fn wait(mut self) -> Output {
-        let mut child = self.child.take().expect("running");
-        let deadline = Instant::now() + RUN_TIMEOUT;
-        while child.try_wait().ok().flatten().is_none() {
-            assert!(
-                Instant::now() < deadline,
-                "mole replay did not finish within {RUN_TIMEOUT:?}\n{}",
-                logs(&self.out)
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let output = child.wait_with_output().expect("collect output");
-        assert!(
-            processes_of(&self.namespace).is_empty(),
-            "processes left behind\n{}",
-            logs(&self.out)
-        );
-        output
-    }
-}
-
-impl Drop for Replay {
-    fn drop(&mut self) {
-        stop_and_clean(self.child.take(), &self.namespace);
-    }
-}
 
 /// iceoryx2's node and service records that name `namespace`: what its stack left behind (told
 /// by name, so that stacks of others on the same machine do not count).
@@ -275,13 +210,17 @@ fn a_replayed_lockstep_run_publishes_what_it_recorded() {
     assert_eq!(replayed.ticks.to_string(), TICKS, "{replayed:#?}");
     assert_eq!(replayed.exit_reason, "ticks");
 
-    let numb = [(mole_types::env::TOUCH_THRESHOLD, "1e9")];
-    let changed = Replay::start(&dir.0, &file, &["--check"], &numb);
+    let numb = ["--check", "--set", "mapping.touch_threshold=1e9"];
+    let changed = Replay::start(&dir.0, &file, &numb, &[]);
     namespaces.push(changed.namespace.clone());
     let replayed = changed.out.join("replay/replayed.mcap");
+    let changed_out = changed.out.clone();
     let changed = changed.wait();
     let said = output_text(&changed);
     assert_eq!(changed.status.code(), Some(1), "{said}");
+    // The setting in force is the one given, in summary.json.
+    let settings = &summary(&changed_out).settings;
+    assert_eq!(settings["mapping"]["touch_threshold"], 1e9, "{settings}");
     let failure = said
         .lines()
         .find(|l| l.starts_with("error: check failed: tick "))

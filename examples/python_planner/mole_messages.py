@@ -719,6 +719,29 @@ class Fault(ctypes.Structure):
 _check(Fault, 112, 8, [0, 32, 36, 40, 72, 80, 88, 96, 104])
 
 
+class ParamChange(ctypes.Structure):
+    """`mole.ParamChange.v1`: 536 bytes, alignment 8."""
+
+    _fields_ = [
+        ("header", Header),
+        ("state", ctypes.c_uint32),
+        ("request", ctypes.c_uint32),
+        ("apply_at", ctypes.c_uint64),
+        ("requested_ns", ctypes.c_uint64),
+        ("role", ctypes.c_uint8 * 32),
+        ("key", ctypes.c_uint8 * 96),
+        ("value", ctypes.c_uint8 * 96),
+        ("text", ctypes.c_uint8 * 256),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "mole.ParamChange.v1"
+
+
+_check(ParamChange, 536, 8, [0, 32, 36, 40, 48, 56, 88, 184, 280])
+
+
 class ControlRequest(ctypes.Structure):
     """`mole.ControlRequest.v1`: 3144 bytes, alignment 8."""
 
@@ -740,7 +763,7 @@ _check(ControlRequest, 3144, 8, [0, 32, 36, 40, 72, 1096])
 
 
 class ControlResponse(ctypes.Structure):
-    """`mole.ControlResponse.v1`: 1104 bytes, alignment 8."""
+    """`mole.ControlResponse.v2`: 8272 bytes, alignment 8."""
 
     _fields_ = [
         ("header", Header),
@@ -751,15 +774,15 @@ class ControlResponse(ctypes.Structure):
         ("steps_lost", ctypes.c_uint64),
         ("steps_repeated", ctypes.c_uint64),
         ("tick", ctypes.c_uint64),
-        ("text", ctypes.c_uint8 * 1024),
+        ("text", ctypes.c_uint8 * 8192),
     ]
 
     @classmethod
     def type_name(cls) -> str:
-        return "mole.ControlResponse.v1"
+        return "mole.ControlResponse.v2"
 
 
-_check(ControlResponse, 1104, 8, [0, 32, 36, 40, 48, 56, 64, 72, 80])
+_check(ControlResponse, 8272, 8, [0, 32, 36, 40, 48, 56, 64, 72, 80])
 
 
 # The constants of shared-types/src/messages.rs.
@@ -928,12 +951,16 @@ STACK_FAULTS = Topic(
     "stack/faults", Fault, history=8, buffer=16, max_publishers=2, max_subscribers=64
 )
 
+STACK_PARAMS = Topic(
+    "stack/params", ParamChange, history=8, buffer=16, max_publishers=32, max_subscribers=64
+)
+
 TOPICS = (
     WORLD_MAP, WORLD_TRUTH, SENSING_SCAN, SENSING_TACTILE, SENSING_ODOM, SENSING_BEACONS,
     SENSING_FIX, LOCALIZATION_POSE, LOCALIZATION_PARTICLES, LOCALIZATION_LANDMARKS,
     LOCALIZATION_TRAJECTORY, MAPPING_GRID, MAPPING_CONTACT, PLANNING_CMD, PLANNING_STATUS,
     STACK_TICK, STACK_STATS, MONITOR_STATUS, STACK_PROCESSES, OPERATOR_GOAL, OPERATOR_PACE,
-    STACK_FAULTS,
+    STACK_FAULTS, STACK_PARAMS,
 )
 
 

@@ -487,7 +487,7 @@ fn split_copy(original: &std::path::Path, peer: &str, port: u16) -> Result<Strin
 }
 
 /// The `mole up` options that make the on-board half run like this one: clock mode, length,
-/// seed, scenario, planners, estimator, goal.
+/// seed, scenario, planners, estimator, goal, settings.
 fn stack_options(up: &UpArgs) -> Vec<String> {
     let mut options = Vec::new();
     let mut add = |flag: &str, value: Option<String>| {
@@ -507,6 +507,9 @@ fn stack_options(up: &UpArgs) -> Vec<String> {
         "scenario",
         up.scenario.as_ref().map(|s| s.display().to_string()),
     );
+    for set in &up.sets {
+        add("set", Some(set.clone()));
+    }
     options
 }
 

@@ -34,7 +34,7 @@ pub struct NamespaceArgs {
     pub namespace: String,
 }
 
-fn call(
+pub(crate) fn call(
     namespace: &str,
     request: ControlRequest,
     timeout: f64,
@@ -51,7 +51,7 @@ fn call(
         .map_err(|e| Failure::run(e.to_string()))
 }
 
-fn answer(response: &ControlResponse) -> Result<String, Failure> {
+pub(crate) fn answer(response: &ControlResponse) -> Result<String, Failure> {
     let text = read_name(&response.text).into_owned();
     match response.status {
         CONTROL_OK => Ok(text),

@@ -63,6 +63,9 @@ pub struct EvalArgs {
     /// Replace a role's process in every run, as `mole up --swap`.
     #[arg(long = "swap", value_name = "ROLE=COMMAND")]
     pub swaps: Vec<String>,
+    /// Set a setting in every run, as `mole up --set ROLE.KEY=VALUE` (docs/settings.md).
+    #[arg(long = "set", value_name = "ROLE.KEY=VALUE")]
+    pub sets: Vec<String>,
     /// Worlds run at once (default: the machine's cores).
     #[arg(long)]
     pub jobs: Option<usize>,
@@ -93,9 +96,13 @@ pub struct EvalArgs {
     #[arg(
         long,
         value_name = "DIR",
-        conflicts_with_all = ["planner", "estimator", "local_planner", "task", "swaps", "ticks", "json", "check", "plot"]
+        conflicts_with_all = ["planner", "estimator", "local_planner", "task", "swaps", "sets", "ticks", "json", "check", "plot"]
     )]
     pub baselines: Option<PathBuf>,
+    /// With `--baselines`: run nothing, draw the plots again from the stored reports (after
+    /// suites were run one by one with `--json`).
+    #[arg(long, requires = "baselines")]
+    pub redraw: bool,
 }
 
 /// What a suite's runs are judged on.
@@ -155,6 +162,9 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
     for swap in &args.swaps {
         parse_swap(swap).map_err(|e| Failure::input(e.to_string()))?;
     }
+    crate::settings::StackSettings::default()
+        .with_sets(&args.sets)
+        .map_err(Failure::input)?;
     if args.worlds == 0 {
         return Err(Failure::input("--worlds: expected at least 1"));
     }
@@ -303,7 +313,7 @@ fn run_baselines(args: &EvalArgs, dir: &Path) -> Result<(), Failure> {
     }
     let mut problems = Vec::new();
     for (i, suite) in suites.iter().enumerate() {
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        if INTERRUPTED.load(Ordering::SeqCst) || args.redraw {
             break;
         }
         let json = dir.join(suite.file());
@@ -471,6 +481,9 @@ fn run_one(args: &EvalArgs, mole: &Path, job: &Job, index: usize) -> Option<Worl
     }
     for swap in &args.swaps {
         command.args(["--swap", swap]);
+    }
+    for set in &args.sets {
+        command.args(["--set", set]);
     }
     // The binaries were built once, before the first run; each run must not build again.
     command.env_remove("CARGO").stdin(Stdio::null());

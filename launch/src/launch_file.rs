@@ -21,6 +21,8 @@ use toml::Spanned;
 
 use crate::LaunchError;
 use crate::order;
+use crate::settings::StackSettings;
+use mole_types::settings::Settings;
 
 /// Where `mole up` looks when no launch file is given.
 pub const DEFAULT_LAUNCH_FILE: &str = "launch/stacks/default.toml";
@@ -204,6 +206,8 @@ pub struct LaunchFile {
     pub processes: Vec<ProcessSpec>,
     /// The `[bridge]` table of a half of a split stack.
     pub bridge: Option<BridgeTable>,
+    /// Every role's settings: its `[ROLE.…]` tables, checked (docs/settings.md).
+    pub settings: StackSettings,
 }
 
 impl LaunchFile {
@@ -286,6 +290,12 @@ struct RawLaunchFile {
     process: Vec<RawProcess>,
     #[serde(default)]
     bridge: Option<Spanned<RawBridge>>,
+    #[serde(default)]
+    planning: mole_planning::Settings,
+    #[serde(default)]
+    localization: mole_localization::Settings,
+    #[serde(default)]
+    mapping: mole_mapping::Settings,
 }
 
 #[derive(Deserialize)]
@@ -476,11 +486,24 @@ pub fn parse_launch_file(text: &str, path: &Path) -> Result<LaunchFile, LaunchEr
     }
 
     let bridge = validate_bridge(raw.bridge, &processes, &invalid)?;
+    let settings = StackSettings {
+        planning: raw.planning,
+        localization: raw.localization,
+        mapping: raw.mapping,
+    };
+    settings.check().map_err(|e| {
+        invalid(
+            crate::settings::located(&e, text),
+            e.key.clone(),
+            format!("{} is out of bounds: expected {}", e.found, e.expected),
+        )
+    })?;
     Ok(LaunchFile {
         path: path.to_path_buf(),
         stack,
         processes,
         bridge,
+        settings,
     })
 }
 

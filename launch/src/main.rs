@@ -8,6 +8,7 @@ use mole_launch::eval::{EvalArgs, eval};
 use mole_launch::export::{ExportArgs, export};
 use mole_launch::fault::{FaultArgs, fault};
 use mole_launch::g2o::{G2oArgs, g2o};
+use mole_launch::param::{ParamArgs, param};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
 use mole_launch::top::{TopArgs, top};
@@ -40,6 +41,8 @@ enum Command {
     /// Inject a fault into a running stack: kill or stop a role, delay, drop or corrupt a
     /// topic's samples, or a seeded chaos session of them.
     Fault(FaultArgs),
+    /// List, get or set the settings of a running stack's processes (docs/settings.md).
+    Param(ParamArgs),
     /// Watch a running stack: each topic's rate, latency, drops; each process's state and CPU.
     Top(TopArgs),
     /// Record every topic of a running stack into an MCAP file, until Ctrl-C or the stack ends.
@@ -84,6 +87,7 @@ fn main() -> ExitCode {
         Command::Stop(args) => stop(&args),
         Command::Status(args) => status(&args),
         Command::Fault(args) => fault(&args),
+        Command::Param(args) => param(&args),
         Command::Eval(args) => eval(&args),
         Command::G2o(args) => g2o(&args),
         Command::Top(args) => top(&args),

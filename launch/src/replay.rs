@@ -3,12 +3,15 @@
 //! replays; `--check` records the replay and compares the live roles' outputs with the
 //! recording's, tick by tick.
 
+use crate::settings::StackSettings;
 use crate::up::{Failure, UpArgs, up};
 use crate::{LaunchFile, ProcessSpec, RestartPolicy, resolve_program};
 use clap::Args;
 use mole_recorder::cast::{Cast, DEFAULT_REPLACED};
+use mole_recorder::tape::for_each_sample;
 use mole_recorder::{Window, compare, read_tape};
-use mole_types::ClockMode;
+use mole_runtime::ScheduledChange;
+use mole_types::{ClockMode, Message, PARAM_APPLIED, ParamChange, read_name, topics};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -41,6 +44,10 @@ pub struct ReplayArgs {
     /// first tick, topic and field that differ.
     #[arg(long)]
     pub check: bool,
+    /// Change a setting of the live roles from what the run was recorded with: ROLE.KEY=VALUE
+    /// (repeatable; docs/settings.md); with `--check`, where the outputs part from the recording.
+    #[arg(long = "set", value_name = "ROLE.KEY=VALUE")]
+    pub sets: Vec<String>,
     /// Namespace of the replayed stack.
     #[arg(long, default_value = mole_types::env::DEFAULT_NAMESPACE)]
     pub namespace: String,
@@ -179,6 +186,31 @@ pub fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         )));
     }
 
+    // The settings the run was recorded with (a recording from before settings: the defaults).
+    let settings = match tape.fact("settings") {
+        None | Some("unknown") => StackSettings::default(),
+        Some(json) => serde_json::from_str::<StackSettings>(json).map_err(|e| {
+            Failure::input(format!(
+                "{}: its metadata `settings` are not this version's: {e}",
+                file.display()
+            ))
+        })?,
+    };
+    // The settings changed while it ran, each applied again before the same step.
+    let mut settings_changes = Vec::new();
+    for_each_sample(&file, &[topics::STACK_PARAMS.name], |sample| {
+        let change = (sample.data.len() == size_of::<ParamChange>())
+            .then(|| bytemuck::pod_read_unaligned::<ParamChange>(&sample.data));
+        if let Some(c) = change.filter(|c| c.validate().is_ok() && c.state == PARAM_APPLIED) {
+            settings_changes.push(ScheduledChange {
+                tick: c.apply_at,
+                role: read_name(&c.role).into_owned(),
+                key: read_name(&c.key).into_owned(),
+                value: read_name(&c.value).into_owned(),
+            });
+        }
+    })
+    .map_err(|e| Failure::input(e.to_string()))?;
     let inputs = args.out.join("replay");
     let written = |name: &str, text: &str| -> Result<PathBuf, Failure> {
         let path = inputs.join(name);
@@ -216,6 +248,9 @@ pub fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         namespace: args.namespace.clone(),
         out: args.out.clone(),
         swaps: Vec::new(),
+        sets: args.sets.clone(),
+        settings: Some(Box::new(settings)),
+        settings_changes,
         quiet: args.quiet,
         record: args.check.then(|| replayed.clone()),
         record_every: match args.check {

@@ -8,6 +8,7 @@ mod prepare;
 use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
 use crate::inject::Injector;
 use crate::keeper::Keeper;
+use crate::param::Tuner;
 use crate::record::{RecordPlan, Recorder};
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
@@ -21,9 +22,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mole_monitor::{Summary, SwapRecord, read_summary, write_summary};
 use mole_runtime::{CommonArgs, Context, ControlServer, Publisher, Subscriber, cleanup_dead_nodes};
 use mole_types::{
-    CONTROL_FAILED, CONTROL_FAULT, CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP,
-    ClockMode, ControlRequest, EndReason, EstimatorKind, FaultSpec, PlannerKind, Processes, Role,
-    RunStatus, Stats, read_name, topics, write_name,
+    CONTROL_FAILED, CONTROL_FAULT, CONTROL_OK, CONTROL_PARAM, CONTROL_REFUSED, CONTROL_STATUS,
+    CONTROL_STOP, ClockMode, ControlRequest, EndReason, EstimatorKind, FaultSpec, PlannerKind,
+    Processes, Role, RunStatus, Stats, read_name, topics, write_name,
 };
 use prepare::{Plan, prepare};
 use std::collections::{BTreeMap, BTreeSet};
@@ -104,6 +105,16 @@ pub struct UpArgs {
     /// Run another executable in a role's place: ROLE=COMMAND (repeatable).
     #[arg(long = "swap", value_name = "ROLE=COMMAND")]
     pub swaps: Vec<String>,
+    /// Set a setting for this run, over the launch file's: ROLE.KEY=VALUE, e.g.
+    /// planning.dwa.critics.heading=0.4 (repeatable; docs/settings.md lists the keys).
+    #[arg(long = "set", value_name = "ROLE.KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Settings that replace the launch file's before `--set` (`mole replay`: the recording's).
+    #[arg(skip)]
+    pub settings: Option<Box<crate::settings::StackSettings>>,
+    /// Settings changes each process applies before a step (`mole replay`: the recording's).
+    #[arg(skip)]
+    pub settings_changes: Vec<mole_runtime::ScheduledChange>,
     /// No progress bar (logs only).
     #[arg(long)]
     pub quiet: bool,
@@ -327,6 +338,8 @@ struct Stack<'a> {
     view: Option<View>,
     /// `mole fault`: the faults injected, and the processes a fault holds stopped.
     faults: Injector,
+    /// `mole param`: the settings in force, changed while the stack runs.
+    tuner: Tuner,
     watch: Watch,
     interrupted: Arc<AtomicBool>,
     progress: ProgressBar,
@@ -350,6 +363,8 @@ fn start(
     let keeper = Keeper::start(&common, args.out.join(RESUME_DIR)).map_err(Failure::run)?;
     let faults = Injector::new(&ports.ctx, plan.mode, plan.seed)
         .map_err(|e| Failure::run(format!("cannot open stack/faults: {e}")))?;
+    let tuner = Tuner::new(&ports.ctx, plan.launch.settings)
+        .map_err(|e| Failure::run(format!("cannot open stack/params: {e}")))?;
     let recorder = recording
         .map(|r| r.start(&plan.env, log_of(args, "recorder")))
         .transpose()?;
@@ -365,6 +380,7 @@ fn start(
         recorder,
         view,
         faults,
+        tuner,
         watch: Watch::new(),
         interrupted,
         progress: progress_bar(plan.ticks, args.quiet),
@@ -413,6 +429,7 @@ fn common_args(args: &UpArgs, plan: &Plan) -> CommonArgs {
         seed: Some(plan.seed),
         takeover: false,
         resume: None,
+        settings: None,
     }
 }
 
@@ -465,6 +482,7 @@ fn supervise(stack: &mut Stack<'_>) -> RunEnd {
         if last_report.elapsed() >= Duration::from_secs(1) {
             last_report = Instant::now();
             publish_processes(stack);
+            stack.tuner.follow(|_| false);
         }
         if let Some(end) = follow_progress(stack) {
             return end;
@@ -525,6 +543,25 @@ fn serve_control(stack: &mut Stack<'_>) -> Option<RunEnd> {
                     r.status = CONTROL_REFUSED;
                     write_name(&mut r.text, why);
                 }
+            });
+        }
+        CONTROL_PARAM => {
+            let (status, text) = match request.argv() {
+                Some(words) => stack.tuner.handle(&words),
+                None => (CONTROL_REFUSED, "the words are not valid UTF-8".to_owned()),
+            };
+            stack.progress.suspend(|| match status {
+                CONTROL_OK if request.argv().is_some_and(|w| w[0] == "set") => {
+                    tracing::info!("setting changed: {text}")
+                }
+                CONTROL_OK => {}
+                _ => tracing::warn!("setting not changed: {text}"),
+            });
+            // Supervision did not watch the steps while the process took it.
+            stack.watch.last_step.1 = Instant::now();
+            call.respond(|r| {
+                r.status = status;
+                write_name(&mut r.text, &text);
             });
         }
         _ => {
@@ -768,6 +805,7 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         recorder,
         view,
         faults,
+        tuner,
         watch,
         progress,
         started,
@@ -776,6 +814,9 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
     progress.finish_and_clear();
     // Before the stop: a process a fault holds stopped could not take its SIGTERM.
     let faults = faults.finish();
+    let mut tuner = tuner;
+    tuner.follow(|_| false);
+    let settings_changes = tuner.changes;
     let stopping: Vec<String> = stop_order(&plan.launch.processes)
         .into_iter()
         .map(|i| plan.launch.processes[i].role.clone())
@@ -837,6 +878,8 @@ fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failure> {
         summary.exit_reason = reason.to_owned();
     }
     summary.launcher_wall_time_s = Some(started.elapsed().as_secs_f64());
+    summary.settings = serde_json::to_value(plan.launch.settings).unwrap_or_default();
+    summary.settings_changes = serde_json::to_value(&settings_changes).unwrap_or_default();
     write_summary(&summary, &summary_path)
         .map_err(|e| Failure::run(format!("cannot complete {}: {e}", summary_path.display())))?;
     report(&summary, &args.out);

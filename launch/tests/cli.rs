@@ -31,11 +31,15 @@ fn help_lists_every_subcommand() {
     assert_eq!(
         listed_subcommands(&[]),
         [
-            "up", "swap", "stop", "status", "fault", "top", "record", "replay", "view", "info",
-            "export", "eval", "g2o", "bench", "help"
+            "up", "swap", "stop", "status", "fault", "param", "top", "record", "replay", "view",
+            "info", "export", "eval", "g2o", "bench", "help"
         ]
     );
     assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
+    assert_eq!(
+        listed_subcommands(&["param"]),
+        ["list", "get", "set", "help"]
+    );
     assert_eq!(
         listed_subcommands(&["fault"]),
         ["kill", "stop", "delay", "drop", "corrupt", "chaos", "help"]
@@ -48,6 +52,8 @@ fn help_lists_every_subcommand() {
         &["fault"],
         &["fault", "kill"],
         &["fault", "chaos"],
+        &["param"],
+        &["param", "set"],
         &["top"],
         &["record"],
         &["replay"],

@@ -29,3 +29,27 @@ fn readme_environment_table_is_env_all() {
         "cargo test -p mole-launch --test readme",
     );
 }
+
+/// The README's lists of planners and estimators (`--planner a|b`, `--estimator a|b`,
+/// `--local-planner a|b`) are the registries' tables, in their order.
+#[test]
+fn readme_lists_every_planner_and_estimator_of_the_tables() {
+    use mole_types::{EstimatorKind, PlannerKind};
+    let readme = std::fs::read_to_string(README).expect("README.md");
+    let followers: Vec<&str> = PlannerKind::ALL
+        .iter()
+        .filter(|p| p.needs_goal())
+        .map(|p| p.name())
+        .collect();
+    for (flag, names) in [
+        ("--planner ", PlannerKind::NAMES.join("|")),
+        ("--estimator ", EstimatorKind::NAMES.join("|")),
+        ("--local-planner ", followers.join("|")),
+    ] {
+        let listed = format!("`{flag}{names}`");
+        assert!(
+            readme.contains(&listed),
+            "README.md does not list {listed}: the table of {flag}changed"
+        );
+    }
+}

@@ -1,6 +1,7 @@
 //! `stack/control`: the launcher's request-response service (docs/architecture.md). `mole swap`,
-//! `mole stop` and `mole status` send a [`ControlRequest`]; the running `mole up` answers with one
-//! [`ControlResponse`].
+//! `mole stop`, `mole status`, `mole fault` and `mole param` send a [`ControlRequest`]; the
+//! running `mole up` answers with one [`ControlResponse`]. A setting changed while the stack runs
+//! travels on to its process as a [`ParamChange`] on `stack/params`.
 
 use crate::messages::{Header, NAME_LEN};
 use crate::{Invalid, Message, within};
@@ -17,13 +18,16 @@ pub const CONTROL_STATUS: u32 = 3;
 /// `ControlRequest::op`: inject the fault `argv` describes (`mole fault`,
 /// `mole_types::FaultSpec::to_words`).
 pub const CONTROL_FAULT: u32 = 4;
+/// `ControlRequest::op`: list, get or set a setting of a running process (`mole param`); `argv`
+/// is `list ROLE`, `get ROLE KEY` or `set ROLE KEY VALUE`.
+pub const CONTROL_PARAM: u32 = 5;
 
 /// Bytes for the NUL-separated words of a command.
 pub const CONTROL_ARGV_LEN: usize = 2048;
 /// Bytes for a directory path.
 pub const CONTROL_PATH_LEN: usize = 1024;
-/// Bytes for the answer's sentence.
-pub const CONTROL_TEXT_LEN: usize = 1024;
+/// Bytes for the answer's text (a sentence, or a role's settings for `mole param list`).
+pub const CONTROL_TEXT_LEN: usize = 8192;
 
 /// One request to the launcher.
 #[repr(C)]
@@ -33,7 +37,7 @@ pub const CONTROL_TEXT_LEN: usize = 1024;
 #[message(check = ControlRequest::check)]
 pub struct ControlRequest {
     pub header: Header,
-    /// `CONTROL_SWAP`, `CONTROL_STOP`, `CONTROL_STATUS` or `CONTROL_FAULT`.
+    /// `CONTROL_SWAP`, `CONTROL_STOP`, `CONTROL_STATUS`, `CONTROL_FAULT` or `CONTROL_PARAM`.
     pub op: u32,
     /// How many NUL-terminated words `argv` holds.
     pub n_args: u32,
@@ -87,12 +91,12 @@ impl ControlRequest {
     fn check(&self) -> Result<(), Invalid> {
         if !matches!(
             self.op,
-            CONTROL_SWAP | CONTROL_STOP | CONTROL_STATUS | CONTROL_FAULT
+            CONTROL_SWAP | CONTROL_STOP | CONTROL_STATUS | CONTROL_FAULT | CONTROL_PARAM
         ) {
             return Err(Invalid::UnknownCode("op"));
         }
         within("n_args", self.n_args, CONTROL_ARGV_LEN / 2)?;
-        if matches!(self.op, CONTROL_SWAP | CONTROL_FAULT)
+        if matches!(self.op, CONTROL_SWAP | CONTROL_FAULT | CONTROL_PARAM)
             && (self.n_args == 0 || self.argv().is_none())
         {
             return Err(Invalid::OutOfRange("argv"));
@@ -113,7 +117,7 @@ pub const CONTROL_FAILED: u32 = 2;
 /// The launcher's answer.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
-#[type_name("mole.ControlResponse.v1")]
+#[type_name("mole.ControlResponse.v2")]
 #[layout(size = 80 + CONTROL_TEXT_LEN)]
 #[message(check = ControlResponse::check)]
 pub struct ControlResponse {
@@ -141,6 +145,74 @@ impl ControlResponse {
     fn check(&self) -> Result<(), Invalid> {
         if self.status > CONTROL_FAILED {
             return Err(Invalid::UnknownCode("status"));
+        }
+        Ok(())
+    }
+}
+
+/// `ParamChange::state`: a request to a role's process (from the launcher, or a replay's
+/// schedule).
+pub const PARAM_REQUESTED: u32 = 1;
+/// `ParamChange::state`: the process took the new value before step `apply_at`.
+pub const PARAM_APPLIED: u32 = 2;
+/// `ParamChange::state`: the process refused it (`text` says why); nothing changed.
+pub const PARAM_REFUSED: u32 = 3;
+/// Bytes for a setting's dotted key below its role.
+pub const PARAM_KEY_LEN: usize = 96;
+/// Bytes for a value as TOML writes it.
+pub const PARAM_VALUE_LEN: usize = 96;
+/// Bytes for the reason of a refusal.
+pub const PARAM_TEXT_LEN: usize = 256;
+
+/// `stack/params`: a setting of a running process changed (`mole param set`). The launcher
+/// publishes the request; the role's process applies it at a step boundary and publishes the
+/// outcome with the step, which the launcher answers with, the recorder keeps as an event and a
+/// replay applies at the same step.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
+#[type_name("mole.ParamChange.v1")]
+#[layout(size = 56 + NAME_LEN + PARAM_KEY_LEN + PARAM_VALUE_LEN + PARAM_TEXT_LEN)]
+#[message(check = ParamChange::check)]
+pub struct ParamChange {
+    pub header: Header,
+    /// `PARAM_REQUESTED`, `PARAM_APPLIED` or `PARAM_REFUSED`.
+    pub state: u32,
+    /// The request's number in the run (the launcher's count); its outcome carries it too.
+    pub request: u32,
+    /// The step before which the value applies; 0 in a request: the next step the process
+    /// handles.
+    pub apply_at: u64,
+    /// The launcher's stamp of the request (ns), so an outcome is matched to its request.
+    pub requested_ns: u64,
+    /// The role, NUL-padded.
+    pub role: [u8; NAME_LEN],
+    /// The key below the role, e.g. `dwa.critics.heading`, NUL-padded.
+    pub key: [u8; PARAM_KEY_LEN],
+    /// The value as TOML writes it, e.g. `0.4` or `"apf"`, NUL-padded.
+    pub value: [u8; PARAM_VALUE_LEN],
+    /// Why it was refused, NUL-padded UTF-8.
+    pub text: [u8; PARAM_TEXT_LEN],
+}
+
+impl ParamChange {
+    /// Whether the values make sense (`Message::validate`).
+    fn check(&self) -> Result<(), Invalid> {
+        if !matches!(self.state, PARAM_REQUESTED | PARAM_APPLIED | PARAM_REFUSED) {
+            return Err(Invalid::UnknownCode("state"));
+        }
+        if self.role[0] == 0 || self.key[0] == 0 {
+            return Err(Invalid::OutOfRange("role/key"));
+        }
+        for (field, bytes) in [
+            ("role", &self.role[..]),
+            ("key", &self.key[..]),
+            ("value", &self.value[..]),
+            ("text", &self.text[..]),
+        ] {
+            let end = bytes.iter().position(|b| *b == 0).unwrap_or(bytes.len());
+            if std::str::from_utf8(&bytes[..end]).is_err() {
+                return Err(Invalid::OutOfRange(field));
+            }
         }
         Ok(())
     }

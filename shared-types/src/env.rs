@@ -29,8 +29,7 @@ env_vars! {
     LOCAL_PLANNER = "MOLE_LOCAL_PLANNER": "the local planner that follows frontier paths (planning)";
     GOAL = "MOLE_GOAL": "a goal `X,Y` in metres that overrides the scenario's (planning)";
     ESTIMATOR = "MOLE_ESTIMATOR": "the estimator (localization, monitor)";
-    PARTICLES = "MOLE_PARTICLES": "the particle filter's particle count, 1 to 1,000,000 (localization)";
-    TOUCH_THRESHOLD = "MOLE_TOUCH_THRESHOLD": "the force (N) above which a tactile reading is a touch (mapping)";
+    SETTINGS = "MOLE_SETTINGS": "the role's settings as JSON, from its `[ROLE.…]` tables and `--set` (planning, localization, mapping; docs/settings.md)";
     OUT = "MOLE_OUT": "the run's output directory: summary.json and map.png (monitor), where the bridge listens (bridge)";
     TAKEOVER = "MOLE_TAKEOVER": "start from the last output of the process this one replaces (a swap)";
     RESUME = "MOLE_RESUME": "a directory with the last outputs of the process this one restarts after a crash (set by the launcher)";

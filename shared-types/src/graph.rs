@@ -297,6 +297,7 @@ mod tests {
                 STACK_STATS.name,
                 STACK_PROCESSES.name,
                 STACK_FAULTS.name,
+                STACK_PARAMS.name,
                 OPERATOR_GOAL.name,
                 OPERATOR_PACE.name,
             ];

@@ -75,6 +75,35 @@ macro_rules! choice {
             }
         }
 
+        impl serde::Serialize for $name {
+            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                serializer.serialize_str(self.name())
+            }
+        }
+
+        impl<'de> serde::Deserialize<'de> for $name {
+            fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+                let text = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
+                text.parse().map_err(serde::de::Error::custom)
+            }
+        }
+
+        impl $crate::settings::Setting for $name {
+            fn kind() -> String {
+                format!("one of: {}", $name::NAMES.join(", "))
+            }
+            fn check_at(&self, _at: &str) -> Result<(), $crate::settings::SettingError> {
+                Ok(())
+            }
+            fn keys_at(
+                at: &str,
+                about: $crate::settings::About,
+                out: &mut Vec<$crate::settings::Key>,
+            ) {
+                out.push($crate::settings::Key::leaf::<Self>(at, about));
+            }
+        }
+
         impl FromStr for $name {
             type Err = UnknownChoice;
             fn from_str(s: &str) -> Result<Self, Self::Err> {
@@ -106,62 +135,138 @@ choice! {
     }
 }
 
-choice! {
-    /// The pose estimators of algorithms §6, as `--estimator` names them; `localization/pose`
-    /// carries the code.
-    pub enum EstimatorKind: "estimator" {
-        /// Histogram Bayes filter (algorithms §6.3).
-        Bayes = ("bayes", 0),
-        /// Linear Kalman filter on the position fix (algorithms §6.5).
-        Kf = ("kf", 1),
-        /// Extended Kalman filter on odometry, beacons and the fix (algorithms §6.6).
-        Ekf = ("ekf", 2),
-        /// Particle filter (algorithms §6.7).
-        Pf = ("pf", 3),
-        /// EKF-SLAM: pose and beacon map in one state (algorithms §6.9).
-        EkfSlam = ("ekf-slam", 4),
-        /// FastSLAM 1.0: particles, each with its own landmark EKFs (algorithms §6.9).
-        FastSlam = ("fastslam", 5),
-        /// GraphSLAM: a filter in front, a pose graph smoothed behind (algorithms §6.9).
-        GraphSlam = ("graph-slam", 6),
-    }
+/// Every estimator, once: its variant, the name `--estimator` takes, its wire code (which
+/// `localization/pose` carries), whether it estimates the beacon map itself (`SLAM`) or reads
+/// the true one (`LOCALISER`), and the type in processes/localization that implements it. A new
+/// estimator is its file there and one line here: `EstimatorKind` is made of this table below,
+/// and mole-localization's registry (`build_estimator`) of the same table. Invoked with the name
+/// of a macro that takes the rows.
+#[macro_export]
+macro_rules! estimators {
+    ($then:ident) => {
+        $then! {
+            /// Histogram Bayes filter (algorithms §6.3).
+            Bayes = ("bayes", 0, HistogramFilter, LOCALISER),
+            /// Linear Kalman filter on the position fix (algorithms §6.5).
+            Kf = ("kf", 1, Kf, LOCALISER),
+            /// Extended Kalman filter on odometry, beacons and the fix (algorithms §6.6).
+            Ekf = ("ekf", 2, Ekf, LOCALISER),
+            /// Particle filter (algorithms §6.7).
+            Pf = ("pf", 3, ParticleFilter, LOCALISER),
+            /// EKF-SLAM: pose and beacon map in one state (algorithms §6.9.2).
+            EkfSlam = ("ekf-slam", 4, EkfSlamEstimator, SLAM),
+            /// FastSLAM 1.0: particles, each with its own landmark EKFs (algorithms §6.9.3).
+            FastSlam = ("fastslam", 5, FastSlamEstimator, SLAM),
+            /// GraphSLAM: a filter in front, a pose graph smoothed behind (algorithms §6.9.4).
+            GraphSlam = ("graph-slam", 6, GraphSlamEstimator, SLAM),
+        }
+    };
 }
 
-impl EstimatorKind {
-    /// Whether it estimates the beacon map itself (and never reads the true one).
-    pub const fn is_slam(self) -> bool {
-        matches!(
-            self,
-            EstimatorKind::EkfSlam | EstimatorKind::FastSlam | EstimatorKind::GraphSlam
-        )
-    }
+macro_rules! estimator_kind {
+    ($( $(#[$meta:meta])* $variant:ident = ($name:literal, $code:literal, $ty:ident, $class:ident) ),+ $(,)?) => {
+        choice! {
+            /// The pose estimators of algorithms §6, as `--estimator` names them
+            /// ([`estimators!`]); `localization/pose` carries the code.
+            pub enum EstimatorKind: "estimator" {
+                $( $(#[$meta])* $variant = ($name, $code) ),+
+            }
+        }
+
+        impl EstimatorKind {
+            /// Whether it estimates the beacon map itself (and never reads the true one).
+            pub const fn is_slam(self) -> bool {
+                match self {
+                    $( EstimatorKind::$variant => estimator_kind!(@slam $class) ),+
+                }
+            }
+        }
+    };
+    (@slam SLAM) => { true };
+    (@slam LOCALISER) => { false };
 }
 
-choice! {
-    /// The planners of algorithms §1, §3–§5, as `--planner` names them.
-    pub enum PlannerKind: "planner" {
-        /// Random walk with bounce-back (algorithms §1, §4).
-        RandomWalk = ("random-walk", 0),
-        /// Artificial potential field towards a goal (algorithms §3).
-        Apf = ("apf", 1),
-        /// Dynamic window approach towards a goal (algorithms §5.3).
-        Dwa = ("dwa", 2),
-        /// Frontier exploration (algorithms §5).
-        Frontier = ("frontier", 3),
-    }
+estimators!(estimator_kind);
+
+/// What a planner needs of a world to run at all.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Needs {
+    /// A goal to drive to (`--goal` or the scenario's).
+    pub goal: bool,
+    /// A range sensor: frontier cells are the edge between the free space a scan shows and the
+    /// unknown (algorithms §5), so with no lidar there is never a frontier.
+    pub range_sensor: bool,
 }
+
+impl Needs {
+    pub const NOTHING: Needs = Needs {
+        goal: false,
+        range_sensor: false,
+    };
+    pub const GOAL: Needs = Needs {
+        goal: true,
+        range_sensor: false,
+    };
+    pub const RANGE_SENSOR: Needs = Needs {
+        goal: false,
+        range_sensor: true,
+    };
+}
+
+/// Every planner, once: its variant, the name `--planner` takes, its code, what it needs of a
+/// world, and the type in processes/planning that implements it. A new planner is its file
+/// there and one line here: `PlannerKind` (with the CLI's choices and `mole up --help`) is made
+/// of this table below, and mole-planning's registry (`build_planner`) of the same table.
+/// Invoked with the name of a macro that takes the rows.
+#[macro_export]
+macro_rules! planners {
+    ($then:ident) => {
+        $then! {
+            /// Random walk with bounce-back (algorithms §3, §4).
+            RandomWalk = ("random-walk", 0, RandomWalk, NOTHING),
+            /// Artificial potential field towards a goal (algorithms §1).
+            Apf = ("apf", 1, Apf, GOAL),
+            /// Dynamic window approach towards a goal (algorithms §4.2).
+            Dwa = ("dwa", 2, Dwa, GOAL),
+            /// Frontier exploration (algorithms §5).
+            Frontier = ("frontier", 3, FrontierExplorer, RANGE_SENSOR),
+        }
+    };
+}
+
+macro_rules! planner_kind {
+    ($( $(#[$meta:meta])* $variant:ident = ($name:literal, $code:literal, $ty:ident, $needs:ident) ),+ $(,)?) => {
+        choice! {
+            /// The planners, as `--planner` names them ([`planners!`]).
+            pub enum PlannerKind: "planner" {
+                $( $(#[$meta])* $variant = ($name, $code) ),+
+            }
+        }
+
+        impl PlannerKind {
+            /// What it needs of a world.
+            pub const fn needs(self) -> Needs {
+                match self {
+                    $( PlannerKind::$variant => Needs::$needs ),+
+                }
+            }
+        }
+    };
+}
+
+planners!(planner_kind);
 
 impl PlannerKind {
-    /// Whether it drives to a goal, so a run needs one (`--goal` or the scenario's).
+    /// Whether it drives to a goal, so a run needs one (`--goal` or the scenario's); these are
+    /// the planners that can follow another's path (`--local-planner`).
     pub const fn needs_goal(self) -> bool {
-        matches!(self, PlannerKind::Apf | PlannerKind::Dwa)
+        self.needs().goal
     }
 
-    /// Whether it explores what the range sensor sees: frontier cells are the edge between the
-    /// free space a scan shows and the unknown (algorithms §5), so with no lidar there is never
-    /// a frontier and it would report an exploration it did not do.
+    /// Whether it explores what the range sensor sees, so it would report an exploration it did
+    /// not do without one.
     pub const fn needs_range_sensor(self) -> bool {
-        matches!(self, PlannerKind::Frontier)
+        self.needs().range_sensor
     }
 
     /// Why this planner cannot run with these sensors (`None`: it can), in one sentence for a

@@ -20,15 +20,16 @@ pub mod graph;
 pub mod layout;
 pub mod link;
 pub mod messages;
+pub mod settings;
 pub mod topics;
 
 pub use control::*;
 pub use fault::{Fault, FaultKind, FaultSpec};
 pub use geometry::*;
 pub use graph::{GRAPH, Role, RoleSpec};
-pub use kinds::{ClockMode, EndReason, EstimatorKind, PlannerKind, UnknownChoice};
+pub use kinds::{ClockMode, EndReason, EstimatorKind, Needs, PlannerKind, UnknownChoice};
 pub use messages::*;
-pub use mole_types_derive::{Layout, Message};
+pub use mole_types_derive::{Layout, Message, Setting};
 pub use topics::Topic;
 
 /// Why a received message was refused.

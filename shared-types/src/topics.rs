@@ -140,6 +140,14 @@ topics! {
     /// applies those aimed at the topics it publishes) and observer; the last 8 from history.
     STACK_FAULTS: crate::fault::Fault =
         Topic::new("stack/faults").history(8).buffer(16).max_subscribers(64).never_waits();
+    /// Settings changed while the stack runs (`mole param set`): the launcher's requests and
+    /// each process's outcome (applied at a step, or refused and why); the last 8 from history.
+    STACK_PARAMS: crate::ParamChange = Topic::new("stack/params")
+        .history(8)
+        .buffer(16)
+        .max_publishers(32)
+        .max_subscribers(64)
+        .never_waits();
 }
 
 /// A request-response service: its name and the types of its requests and responses.

@@ -630,3 +630,71 @@ pub fn view_url(lines: &std::sync::mpsc::Receiver<String>, timeout: Duration) ->
         seen.join("\n")
     )
 }
+
+/// How long a `mole replay` of a test may take.
+pub const REPLAY_TIMEOUT: Duration = Duration::from_secs(300);
+
+/// A running `mole replay`; on drop (a failed test included) it and every process of its
+/// namespace are stopped.
+pub struct Replay {
+    pub namespace: String,
+    pub out: PathBuf,
+    child: Option<Child>,
+}
+
+impl Replay {
+    /// `mole replay FILE` with `args` in a fresh namespace, its output under `dir`; `env` is
+    /// added to its environment (and so to every process it starts).
+    pub fn start(dir: &Path, file: &Path, args: &[&str], env: &[(&str, &str)]) -> Replay {
+        let namespace = unique_namespace("replay");
+        let out = dir.join(&namespace);
+        let child = Command::new(bin_dir().join("mole"))
+            .current_dir(workspace())
+            .env_remove("CARGO")
+            .env_remove("CARGO_MANIFEST_DIR")
+            .envs(env.iter().copied())
+            .arg("replay")
+            .arg(file)
+            .args(args)
+            .args(["--namespace", &namespace, "--quiet", "--out"])
+            .arg(&out)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start mole replay");
+        Replay {
+            namespace,
+            out,
+            child: Some(child),
+        }
+    }
+
+    /// Waits for `mole replay` to exit (killing it after [`REPLAY_TIMEOUT`]); nothing of its
+    /// namespace may be left running.
+    pub fn wait(mut self) -> Output {
+        let mut child = self.child.take().expect("running");
+        let deadline = Instant::now() + REPLAY_TIMEOUT;
+        while child.try_wait().ok().flatten().is_none() {
+            assert!(
+                Instant::now() < deadline,
+                "mole replay did not finish within {REPLAY_TIMEOUT:?}\n{}",
+                logs(&self.out)
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let output = child.wait_with_output().expect("collect output");
+        assert!(
+            processes_of(&self.namespace).is_empty(),
+            "processes left behind\n{}",
+            logs(&self.out)
+        );
+        output
+    }
+}
+
+impl Drop for Replay {
+    fn drop(&mut self) {
+        stop_and_clean(self.child.take(), &self.namespace);
+    }
+}

@@ -582,3 +582,34 @@ fn bad_bridge_tables_name_the_field() {
         .contains("no process with role = \"bridge\"")
     );
 }
+
+/// A role's settings tables are read, and an unknown key, a value of the wrong kind or out of
+/// its bounds names the file, the line and the key.
+#[test]
+fn settings_tables_are_read_and_bad_ones_name_line_and_key() {
+    let lf = parse(&format!(
+        "{VALID}\n[planning.dwa.critics]\nheading = 0.4\n\n[localization.pf]\nn_particles = 2000\n\n[mapping]\ntouch_threshold = 1.5\n"
+    ))
+    .unwrap();
+    assert_eq!(lf.settings.planning.dwa.critics.heading, 0.4);
+    assert_eq!(lf.settings.localization.pf.n_particles, 2000);
+    assert_eq!(lf.settings.mapping.touch_threshold, 1.5);
+    assert_eq!(parse(VALID).unwrap().settings, StackSettings::default());
+
+    // line 28 is the key's own line in each case below.
+    let msg = err(&format!("{VALID}\n[planning.dwa]\nheading_weight = 0.4\n"));
+    assert!(msg.starts_with("launch/stacks/x.toml:28:1:"), "{msg}");
+    assert!(msg.contains("unknown field `heading_weight`"), "{msg}");
+    let msg = err(&format!(
+        "{VALID}\n[planning.dwa]\npredict_time = \"long\"\n"
+    ));
+    assert!(msg.starts_with("launch/stacks/x.toml:28:"), "{msg}");
+    assert!(msg.contains("planning.dwa.predict_time"), "{msg}");
+    assert!(msg.contains("invalid type"), "{msg}");
+    let msg = err(&format!("{VALID}\n[localization.pf]\nn_particles = 0\n"));
+    assert_eq!(
+        msg,
+        "launch/stacks/x.toml:28:15: field `localization.pf.n_particles`: 0 is out of bounds: \
+         expected a value ≥ 1"
+    );
+}

@@ -33,6 +33,13 @@ pub(super) struct Plan {
 /// Reads, overrides and checks everything; nothing has started when this fails.
 pub(super) fn prepare(args: &UpArgs) -> Result<Plan, Failure> {
     let (mut launch, scenario_path, scenario) = load_stack(args)?;
+    launch.settings = args
+        .settings
+        .as_deref()
+        .copied()
+        .unwrap_or(launch.settings)
+        .with_sets(&args.sets)
+        .map_err(Failure::input)?;
     give_the_bridge_its_settings(&mut launch)?;
     check_goal(launch.stack.planner, args.goal, &scenario)?;
     if let Some(why) = launch
@@ -62,7 +69,11 @@ pub(super) fn prepare(args: &UpArgs) -> Result<Plan, Failure> {
         programs.insert(process.role.clone(), program);
     }
     prepare_out_dir(&args.out)?;
-    let env = child_env(args, &launch.stack, &scenario_path, ticks, seed);
+    let mut env = child_env(args, &launch.stack, &scenario_path, ticks, seed);
+    env.push((
+        env::SETTINGS.to_owned(),
+        launch.settings.to_json_with(&args.settings_changes),
+    ));
     Ok(Plan {
         mode: launch.stack.mode,
         launch,

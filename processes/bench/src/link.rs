@@ -130,6 +130,7 @@ pub(crate) fn with_runtime<M: BenchMessage, T>(
         seed: None,
         takeover: false,
         resume: None,
+        settings: None,
     };
     let mut ctx = Context::with_shutdown_flag(role, &args, Arc::new(AtomicBool::new(false)))?;
     let data_out = ports

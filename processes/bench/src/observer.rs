@@ -134,6 +134,7 @@ mod tests {
             seed: None,
             takeover: false,
             resume: None,
+            settings: None,
         };
         let shutdown = Arc::new(AtomicBool::new(false));
         let mut process = Process::with_shutdown_flag("observer-1", &args, shutdown).unwrap();

@@ -16,10 +16,12 @@ use crate::models::{BeaconTable, odometry_is_plausible, sinc, wrap_near};
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError, Readings};
 use core::f64::consts::{PI, TAU};
+use mole_types::Setting;
 use mole_types::{
     BeaconReading, BeaconSite, Beacons, EstimatorKind, Fix, MAX_BEACONS, Odom, Pose2, WorldMap,
     wrap_angle,
 };
+use serde::{Deserialize, Serialize};
 
 /// Default cell size (m).
 pub const DEFAULT_CELL_SIZE: f64 = 0.1;
@@ -38,13 +40,17 @@ pub const PRUNE_BELOW: f64 = 1e-18;
 const MAX_BLUR: f64 = 0.25;
 
 /// Tuning of a [`HistogramFilter`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct BayesConfig {
     /// Cell size (m); raised so that no axis has more than `max_cells_per_axis` cells.
+    #[setting(above = 0.0)]
     pub cell_size: f64,
     /// n_θ, heading bins over the full circle (≥ 1).
+    #[setting(min = 1)]
     pub heading_bins: usize,
     /// Cap on cells per axis.
+    #[setting(min = 1)]
     pub max_cells_per_axis: usize,
     /// Start from a uniform belief (global localisation) instead of a Gaussian at the start.
     pub uniform_prior: bool,

@@ -288,6 +288,11 @@ fn default_initial_sigma() -> Matrix3<f64> {
 }
 
 impl Estimator for Ekf {
+    fn set_noise(&mut self, noise: &NoiseModel) -> Result<(), String> {
+        self.noise = *noise;
+        Ok(())
+    }
+
     fn id(&self) -> u32 {
         EstimatorKind::Ekf.code()
     }

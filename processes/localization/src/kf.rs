@@ -235,6 +235,11 @@ impl Kf {
 }
 
 impl Estimator for Kf {
+    fn set_noise(&mut self, noise: &NoiseModel) -> Result<(), String> {
+        self.noise = *noise;
+        Ok(())
+    }
+
     fn id(&self) -> u32 {
         EstimatorKind::Kf.code()
     }

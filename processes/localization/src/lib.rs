@@ -21,6 +21,7 @@ pub mod kf;
 pub mod models;
 pub mod noise;
 pub mod pf;
+pub mod settings;
 pub mod slam;
 
 pub use bayes::{BayesConfig, HistogramFilter};
@@ -39,6 +40,7 @@ use mole_types::{
     arc_between,
 };
 use nalgebra::Vector2;
+pub use settings::Settings;
 pub use slam::{EkfSlamEstimator, FastSlamEstimator};
 use thiserror::Error;
 
@@ -134,6 +136,12 @@ pub fn odometry_since(
 pub trait Estimator {
     /// The estimator's id, `mole_types::ESTIMATOR_EKF` etc.
     fn id(&self) -> u32;
+    /// Assumes `noise` from the next step on (`mole param set localization noise.…`), keeping
+    /// its belief; `Err` says why it cannot. By default an estimator cannot (the histogram
+    /// filter's likelihood tables and GraphSLAM's factors are built with the noise).
+    fn set_noise(&mut self, _noise: &NoiseModel) -> Result<(), String> {
+        Err("this estimator builds its tables with the noise at start".to_owned())
+    }
     /// Prediction step (algorithms §6.3): moves the belief by the control u_t = (v, ω) over `odom.dt`.
     fn predict(&mut self, odom: &Odom);
     /// Correction step (algorithms §6.3): folds in every correction reading `readings` holds
@@ -267,74 +275,165 @@ pub enum LocalizationError {
     Smoother(String),
 }
 
-/// Builds estimator `kind` for the world in `map` with its default configuration: the
-/// localisers from the start pose, sensor noise and beacons (the PF also the seed); the SLAM
-/// estimators from the start pose, sensor noise and seed only (never the beacons). All buffers
-/// are allocated here (GraphSLAM also starts its smoother thread).
+/// An estimator the registry builds: one row of [`mole_types::estimators!`] names its type.
+pub trait Registered: Estimator + Sized + 'static {
+    /// Built for the world in `map` (its sensors' noise as the settings assume it) with
+    /// `settings`: the localisers from the start pose, noise and beacons (the PF also the seed);
+    /// the SLAM estimators from the start pose, noise and seed only (never the beacons). All
+    /// buffers are allocated here (GraphSLAM also starts its smoother thread).
+    fn build(map: &WorldMap, settings: &Settings) -> Result<Self, LocalizationError>;
+
+    /// Built to go on from another estimator's output (a swap or a restart), see [`resume`];
+    /// by default built afresh at `pose`'s mean with its usual initial uncertainty.
+    fn resume(
+        map: &WorldMap,
+        settings: &Settings,
+        pose: &Pose,
+        _landmarks: Option<&Landmarks>,
+    ) -> Result<Self, LocalizationError> {
+        Self::build(&starting_at(map, pose), settings)
+    }
+}
+
+/// The dispatch of [`build_estimator_with`] and [`resume_with`], from the table of estimators
+/// (`mole_types::estimators!`).
+macro_rules! registry {
+    ($( $(#[$meta:meta])* $variant:ident = ($name:literal, $code:literal, $ty:ident, $class:ident) ),+ $(,)?) => {
+        /// Builds estimator `kind` for the world in `map` with `settings` (see [`Registered::build`]).
+        pub fn build_estimator_with(
+            kind: EstimatorKind,
+            map: &WorldMap,
+            settings: &Settings,
+        ) -> Result<Box<dyn Estimator>, LocalizationError> {
+            let map = settings.noise.assumed(map);
+            Ok(match kind {
+                $( EstimatorKind::$variant => Box::new(<$ty as Registered>::build(&map, settings)?), )+
+            })
+        }
+
+        /// [`resume`] with `settings`.
+        pub fn resume_with(
+            kind: EstimatorKind,
+            map: &WorldMap,
+            settings: &Settings,
+            pose: &Pose,
+            landmarks: Option<&Landmarks>,
+        ) -> Result<Box<dyn Estimator>, LocalizationError> {
+            let map = settings.noise.assumed(map);
+            Ok(match kind {
+                $( EstimatorKind::$variant => {
+                    Box::new(<$ty as Registered>::resume(&map, settings, pose, landmarks)?)
+                } )+
+            })
+        }
+    };
+}
+mole_types::estimators!(registry);
+
+/// Builds estimator `kind` for the world in `map` with the default settings.
 pub fn build_estimator(
     kind: EstimatorKind,
     map: &WorldMap,
 ) -> Result<Box<dyn Estimator>, LocalizationError> {
-    Ok(match kind {
-        EstimatorKind::Bayes => Box::new(HistogramFilter::from_map(map)),
-        EstimatorKind::Kf => Box::new(Kf::from_map(map)),
-        EstimatorKind::Ekf => Box::new(Ekf::from_map(map)),
-        EstimatorKind::Pf => Box::new(ParticleFilter::from_map(map)),
-        EstimatorKind::EkfSlam => Box::new(EkfSlamEstimator::from_map(map)),
-        EstimatorKind::FastSlam => Box::new(FastSlamEstimator::from_map(map)),
-        EstimatorKind::GraphSlam => Box::new(GraphSlamEstimator::from_map(map)?),
-    })
+    build_estimator_with(kind, map, &Settings::default())
 }
 
-/// Builds estimator `kind` to go on from another estimator's output (a swap or a restart):
-/// from `pose` and, for the SLAM kinds, from `landmarks` too. The EKF starts at N(pose, its
-/// covariance) (its whole belief: a restarted EKF goes on exactly); the other localisers at the
-/// pose's mean with their usual initial uncertainty (as [`build_estimator`] at the start pose);
-/// the SLAM estimators start at N(pose, its covariance) with every usable landmark of
-/// `landmarks` (mean and 2×2 covariance, uncorrelated with the pose and with each other: the
-/// message carries no cross-covariances). Landmarks that are not finite and positive definite
-/// are skipped and counted as ignored.
-/// [`resume`] from `pose` when there is one (a swap or a restart), else [`build_estimator`]; a
-/// particle filter runs `particles` particles (1..=[`pf::MAX_FILTER_PARTICLES`]).
+/// [`resume_with`] from `pose` when there is one (a swap or a restart), else
+/// [`build_estimator_with`].
 pub fn start_estimator(
     kind: EstimatorKind,
     map: &WorldMap,
+    settings: &Settings,
     pose: Option<&Pose>,
     landmarks: Option<&Landmarks>,
-    particles: usize,
 ) -> Result<Box<dyn Estimator>, LocalizationError> {
-    if kind == EstimatorKind::Pf {
-        let config = PfConfig {
-            n_particles: particles,
-            ..PfConfig::default()
-        };
-        let pf = match pose {
-            Some(pose) => ParticleFilter::from_map_with(&starting_at(map, pose), config),
-            None => ParticleFilter::from_map_with(map, config),
-        };
-        return Ok(Box::new(pf));
-    }
     match pose {
-        Some(pose) => resume(kind, map, pose, landmarks),
-        None => build_estimator(kind, map),
+        Some(pose) => resume_with(kind, map, settings, pose, landmarks),
+        None => build_estimator_with(kind, map, settings),
     }
 }
 
+/// Builds estimator `kind` to go on from another estimator's output (a swap or a restart),
+/// with the default settings: from `pose` and, for the SLAM kinds, from `landmarks` too. The
+/// EKF starts at N(pose, its covariance) (its whole belief: a restarted EKF goes on exactly);
+/// the other localisers at the pose's mean with their usual initial uncertainty (as
+/// [`build_estimator`] at the start pose); the SLAM estimators start at N(pose, its covariance)
+/// with every usable landmark of `landmarks` (mean and 2×2 covariance, uncorrelated with the
+/// pose and with each other: the message carries no cross-covariances). Landmarks that are not
+/// finite and positive definite are skipped and counted as ignored.
 pub fn resume(
     kind: EstimatorKind,
     map: &WorldMap,
     pose: &Pose,
     landmarks: Option<&Landmarks>,
 ) -> Result<Box<dyn Estimator>, LocalizationError> {
-    Ok(match kind {
-        EstimatorKind::EkfSlam => Box::new(EkfSlamEstimator::resume(map, pose, landmarks)),
-        EstimatorKind::FastSlam => Box::new(FastSlamEstimator::resume(map, pose, landmarks)),
-        EstimatorKind::GraphSlam => Box::new(GraphSlamEstimator::resume(map, pose, landmarks)?),
-        EstimatorKind::Ekf => Box::new(Ekf::resume(map, pose)),
-        EstimatorKind::Bayes | EstimatorKind::Kf | EstimatorKind::Pf => {
-            build_estimator(kind, &starting_at(map, pose))?
+    resume_with(kind, map, &Settings::default(), pose, landmarks)
+}
+
+impl Registered for HistogramFilter {
+    fn build(map: &WorldMap, settings: &Settings) -> Result<Self, LocalizationError> {
+        Ok(HistogramFilter::from_map_with(map, settings.bayes))
+    }
+}
+
+impl Registered for Kf {
+    fn build(map: &WorldMap, _settings: &Settings) -> Result<Self, LocalizationError> {
+        Ok(Kf::from_map(map))
+    }
+}
+
+impl Registered for Ekf {
+    fn build(map: &WorldMap, _settings: &Settings) -> Result<Self, LocalizationError> {
+        Ok(Ekf::from_map(map))
+    }
+    fn resume(
+        map: &WorldMap,
+        _settings: &Settings,
+        pose: &Pose,
+        _landmarks: Option<&Landmarks>,
+    ) -> Result<Self, LocalizationError> {
+        Ok(Ekf::resume(map, pose))
+    }
+}
+
+impl Registered for ParticleFilter {
+    fn build(map: &WorldMap, settings: &Settings) -> Result<Self, LocalizationError> {
+        Ok(ParticleFilter::from_map_with(map, settings.pf))
+    }
+}
+
+/// The SLAM filters, built and resumed by their own `with_settings` and `resume_with`.
+macro_rules! registered_slam_filter {
+    ($($ty:ident),+) => {$(
+        impl Registered for $ty {
+            fn build(map: &WorldMap, settings: &Settings) -> Result<Self, LocalizationError> {
+                Ok($ty::with_settings(map, settings))
+            }
+            fn resume(
+                map: &WorldMap,
+                settings: &Settings,
+                pose: &Pose,
+                landmarks: Option<&Landmarks>,
+            ) -> Result<Self, LocalizationError> {
+                Ok($ty::resume_with(map, settings, pose, landmarks))
+            }
         }
-    })
+    )+};
+}
+registered_slam_filter!(EkfSlamEstimator, FastSlamEstimator);
+
+impl Registered for GraphSlamEstimator {
+    fn build(map: &WorldMap, settings: &Settings) -> Result<Self, LocalizationError> {
+        GraphSlamEstimator::with_settings(map, settings)
+    }
+    fn resume(
+        map: &WorldMap,
+        settings: &Settings,
+        pose: &Pose,
+        landmarks: Option<&Landmarks>,
+    ) -> Result<Self, LocalizationError> {
+        GraphSlamEstimator::resume_with(map, settings, pose, landmarks)
+    }
 }
 
 /// The map with its start pose moved to `pose`.
@@ -422,7 +521,8 @@ mod tests {
         assert_eq!(particles.n_particles as usize, pf::DEFAULT_PARTICLES);
     }
 
-    /// A particle filter started fresh or after a swap runs the particle count it is given.
+    /// A particle filter started fresh or after a swap runs the particle count its settings
+    /// give it (`localization.pf.n_particles`).
     #[test]
     fn the_particle_filter_runs_the_count_it_is_given() {
         let mut map = test_support::zeroed_map();
@@ -430,10 +530,39 @@ mod tests {
         let mut pose: Box<Pose> = bytemuck::zeroed_box();
         (pose.x, pose.y) = (2.0, 1.5);
         let mut particles: Box<Particles> = bytemuck::zeroed_box();
+        let mut settings = Settings::default();
+        settings.pf.n_particles = 300;
         for from in [None, Some(&*pose)] {
-            let est = start_estimator(EstimatorKind::Pf, &map, from, None, 300).unwrap();
+            let est = start_estimator(EstimatorKind::Pf, &map, &settings, from, None).unwrap();
             assert!(est.write_particles(&mut particles));
             assert_eq!(particles.n_particles, 300, "resumed: {}", from.is_some());
         }
+    }
+
+    /// The settings an estimator assumes reach it: a σ set replaces the sensor's, the others stay
+    /// the world's; a particle count out of its bounds is refused naming the key.
+    #[test]
+    fn settings_set_the_assumed_noise_and_bound_the_particle_count() {
+        use mole_types::settings::Settings as _;
+        let mut map = test_support::zeroed_map();
+        (map.sensors.odom_v_std, map.sensors.beacon_range_std) = (0.02, 0.05);
+        let mut settings = Settings::default();
+        settings.noise.odom_v_std = Some(0.5);
+        let assumed = settings.noise.assumed(&map);
+        assert_eq!(assumed.sensors.odom_v_std, 0.5);
+        assert_eq!(assumed.sensors.beacon_range_std, 0.05);
+        for bad in ["0", "1000001"] {
+            let e = Settings::default().with("pf.n_particles", bad).unwrap_err();
+            assert_eq!(e.key, "pf.n_particles", "{bad}");
+        }
+        assert!(Settings::default().with("noise.fix_std", "-1.0").is_err());
+        assert_eq!(
+            Settings::default()
+                .with("pf.n_particles", "7")
+                .unwrap()
+                .pf
+                .n_particles,
+            7
+        );
     }
 }

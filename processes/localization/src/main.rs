@@ -9,7 +9,9 @@
 
 use clap::Parser;
 use mole_localization::slam::{PEER_LANDMARKS, PeerArgs, PeerFusion};
-use mole_localization::{EstimatorKind, Readings, odometry_since, pf, start_estimator};
+use mole_localization::{
+    EstimatorKind, NoiseModel, Readings, Settings, odometry_since, start_estimator,
+};
 use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule, now_ns};
 use mole_types::{env, topics};
 use std::process::ExitCode;
@@ -28,26 +30,12 @@ struct Args {
     common: CommonArgs,
     #[arg(long, env = env::ESTIMATOR, default_value_t = EstimatorKind::Ekf)]
     estimator: EstimatorKind,
-    /// The particle filter's particle count (--estimator pf); above 16,384 the published cloud
-    /// is an evenly strided subset of 16,384.
-    #[arg(long, env = env::PARTICLES, default_value_t = pf::DEFAULT_PARTICLES,
-          value_parser = particle_count)]
-    particles: usize,
     #[command(flatten)]
     peers: PeerArgs,
 }
 
 fn main() -> ExitCode {
     mole_runtime::exit_code(run(&Args::parse()))
-}
-
-/// `--particles`: a whole number from 1 to [`pf::MAX_FILTER_PARTICLES`].
-fn particle_count(text: &str) -> Result<usize, String> {
-    let max = pf::MAX_FILTER_PARTICLES;
-    match text.trim().parse::<usize>() {
-        Ok(n) if (1..=max).contains(&n) => Ok(n),
-        _ => Err(format!("`{text}` is not a particle count from 1 to {max}")),
-    }
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
@@ -57,6 +45,8 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         .checked(kind, &args.common.namespace)
         .map_err(|e| BadInput(e.to_string()))?;
     let mut p = Process::new("localization", &args.common)?;
+    let tuning = p.tuning::<Settings>(&args.common)?;
+    let settings = *tuning.settings();
     // A replacement (a swap, a restart) goes on from the estimate and SLAM map before it.
     let landmarks_were = kind
         .is_slam()
@@ -83,19 +73,17 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let tick_dt = std::cell::Cell::new(0.0);
     let force_std = std::cell::Cell::new(0.0);
 
-    p.run(
+    p.run_tuned(
+        tuning,
         |start| {
             tick_dt.set(start.map.dt);
             force_std.set(start.map.sensors.tactile_force_std);
-            Ok(start_estimator(
-                kind,
-                start.map,
-                pose_was.as_deref(),
-                landmarks_were.as_deref(),
-                args.particles,
-            )?)
+            let (map, pose, landmarks) =
+                (start.map, pose_was.as_deref(), landmarks_were.as_deref());
+            let estimator = start_estimator(kind, map, &settings, pose, landmarks)?;
+            Ok((estimator, Box::new(*map)))
         },
-        |estimator, step| {
+        |(estimator, _), step| {
             let measured = step.trigger(odom);
             let gap = step.ticks_since_last();
             let odom = odometry_since(measured, odom_before, gap, tick_dt.get());
@@ -133,26 +121,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             }
             Ok(())
         },
+        // Only the noise changes while the estimator runs (the rest is fixed, docs/settings.md).
+        |(estimator, map), new| estimator.set_noise(&NoiseModel::from_map(&new.noise.assumed(map))),
     )?;
     peer.inspect(|peer| fusion.log_totals(peer));
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// `--particles` takes 1 to 1,000,000 and refuses anything else, saying what it expects.
-    #[test]
-    fn particle_counts_outside_the_range_are_refused() {
-        assert_eq!(particle_count("1"), Ok(1));
-        assert_eq!(particle_count("1000000"), Ok(pf::MAX_FILTER_PARTICLES));
-        for bad in ["0", "1000001", "-5", "10k", ""] {
-            let e = particle_count(bad).unwrap_err();
-            assert!(e.contains("from 1 to 1000000"), "{bad}: {e}");
-        }
-        let e = Args::try_parse_from(["mole-localization", "--particles", "0"]).unwrap_err();
-        assert_eq!(e.exit_code(), 2);
-        assert!(e.to_string().contains("--particles"), "{e}");
-    }
 }

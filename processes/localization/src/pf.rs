@@ -11,6 +11,7 @@
 use crate::models::{BeaconTable, MIN_RANGE, sinc, sliding_is_plausible, wrap_near};
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError, Readings};
+use mole_types::Setting;
 use mole_types::{
     BeaconReading, BeaconSite, EstimatorKind, Fix, MAX_PARTICLES, Odom, Particle, Particles, Pose2,
     WorldMap, wrap_angle,
@@ -19,10 +20,11 @@ use nalgebra::Vector2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
 
 /// Default particle count J.
 pub const DEFAULT_PARTICLES: usize = 10_000;
-/// The most particles a filter runs (`--particles`); more than the message holds
+/// The most particles a filter runs (`localization.pf.n_particles`); more than the message holds
 /// ([`MAX_PARTICLES`]): what is published is then a subset ([`ParticleFilter::len`] vs the
 /// message's `n_particles`).
 pub const MAX_FILTER_PARTICLES: usize = 1_000_000;
@@ -111,15 +113,20 @@ pub fn low_variance_resample(weights: &[f64], r: f64, out: &mut [usize]) {
 }
 
 /// Tuning of a [`ParticleFilter`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct PfConfig {
     /// J, the number of particles (1..=[`MAX_FILTER_PARTICLES`]).
+    #[setting(min = 1, max = MAX_FILTER_PARTICLES, fixed = "the particle set is allocated at start")]
     pub n_particles: usize,
     /// Resample when N_eff < `resample_threshold` · J.
+    #[setting(min = 0.0, max = 1.0)]
     pub resample_threshold: f64,
     /// σ (m) of the initial particles around the start position.
+    #[setting(min = 0.0)]
     pub initial_std_xy: f64,
     /// σ (rad) of the initial particles around the start heading.
+    #[setting(min = 0.0)]
     pub initial_std_theta: f64,
 }
 
@@ -451,6 +458,11 @@ impl ParticleFilter {
 }
 
 impl Estimator for ParticleFilter {
+    fn set_noise(&mut self, noise: &NoiseModel) -> Result<(), String> {
+        self.noise = *noise;
+        Ok(())
+    }
+
     fn id(&self) -> u32 {
         EstimatorKind::Pf.code()
     }

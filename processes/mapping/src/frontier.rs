@@ -2,29 +2,41 @@
 //! grid in log-odds (Thrun, Burgard & Fox, *Probabilistic Robotics*, §9.2, Table 9.1).
 
 use crate::{GridGeometry, MappingError};
+use mole_types::Setting;
 use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, GRID_FRONTIER, Grid, Pose2, Scan};
+use serde::{Deserialize, Serialize};
 
 /// The log-odds increments and bounds of the inverse sensor models.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
+#[setting(check = LogOddsParams::check_setting)]
 pub struct LogOddsParams {
     /// Increment for the cell a beam ends in: log(0.7/0.3) (Probabilistic Robotics §9.2, l_occ).
+    #[setting(above = 0.0)]
     pub hit: f32,
     /// Increment for a cell a beam passes through: log(0.4/0.6) (Probabilistic Robotics §9.2, l_free).
+    #[setting(max = 0.0)]
     pub miss: f32,
     /// Increment for a touched cell: saturating, so that one touch makes a cell occupied and
     /// takes lidar passes to undo (touch is the most direct evidence there is).
+    #[setting(above = 0.0)]
     pub touch: f32,
     /// Increment for a cell under the robot's disk.
+    #[setting(max = 0.0)]
     pub footprint: f32,
     /// Lower clamp of the log-odds (Probabilistic Robotics §9.2: bounded so the map can recover).
+    #[setting(max = 0.0)]
     pub min: f32,
     /// Upper clamp of the log-odds.
+    #[setting(above = 0.0)]
     pub max: f32,
     /// A cell is unexplored while |l| < threshold, else free (l < 0) or occupied (l > 0).
+    #[setting(above = 0.0)]
     pub threshold: f32,
     /// How far past the measured range the hit point is taken, in cells; 0.5 marks the cell whose
     /// centre lies behind the surface (for a beam along an axis), so a surface on a cell edge is
     /// not split by the range noise between the two cells beside it.
+    #[setting(min = 0.0)]
     pub hit_depth_cells: f64,
 }
 
@@ -80,6 +92,13 @@ impl LogOddsParams {
             ));
         }
         Ok(())
+    }
+
+    /// [`LogOddsParams::check`] as a setting's check.
+    fn check_setting(&self) -> Result<(), mole_types::settings::SettingError> {
+        self.check().map_err(|e| {
+            mole_types::settings::SettingError::new("", &e.to_string(), &"these log-odds")
+        })
     }
 
     /// Algorithms §5.2's cell value for log-odds `l`.
@@ -152,6 +171,14 @@ impl FrontierGrid {
     /// The log-odds parameters in use.
     pub fn params(&self) -> &LogOddsParams {
         &self.params
+    }
+
+    /// New log-odds parameters from the next update on (`mole param set`); the cells keep
+    /// their log-odds, clamped into the new bounds as they are next updated.
+    pub fn set_params(&mut self, params: LogOddsParams) -> Result<(), MappingError> {
+        params.check()?;
+        self.params = params;
+        Ok(())
     }
 
     /// Algorithms §5.2's cells (0 unexplored, 1 free, 2 occupied), row-major, maintained incrementally.

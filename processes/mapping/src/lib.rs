@@ -10,11 +10,13 @@ pub mod contact;
 pub mod frontier;
 pub mod geometry;
 pub mod maps;
+pub mod settings;
 
 pub use contact::{ContactGrid, estimate_contacts};
 pub use frontier::{FrontierGrid, LogOddsParams};
 pub use geometry::GridGeometry;
 pub use maps::Maps;
+pub use settings::Settings;
 
 /// Why a grid could not be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

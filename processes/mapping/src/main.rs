@@ -6,9 +6,9 @@
 //! previous step's grid), so in lockstep it may fall a step behind and takes every pose in order.
 
 use clap::Parser;
-use mole_mapping::Maps;
+use mole_mapping::{Maps, Settings};
 use mole_runtime::{CommonArgs, Order, Process, Rule};
-use mole_types::{Pose2, env, topics};
+use mole_types::{Pose2, topics};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -19,9 +19,6 @@ use std::process::ExitCode;
 struct Args {
     #[command(flatten)]
     common: CommonArgs,
-    /// A tactile sensor reading above this force (N) is a touch.
-    #[arg(long, env = env::TOUCH_THRESHOLD, default_value_t = 0.5)]
-    touch_threshold: f64,
 }
 
 fn main() -> ExitCode {
@@ -30,6 +27,8 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut p = Process::new("mapping", &args.common)?;
+    let tuning = p.tuning::<Settings>(&args.common)?;
+    let settings = *tuning.settings();
     // A replacement goes on from the grids of the one it replaces (the frontier grid is
     // published last, so its step is the one to resume after).
     let contact_was = p.resume_from(topics::MAPPING_CONTACT)?;
@@ -40,9 +39,10 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut grid_out = p.output(topics::MAPPING_GRID)?;
     let mut contact_out = p.output(topics::MAPPING_CONTACT)?;
 
-    p.run(
+    p.run_tuned(
+        tuning,
         |start| {
-            let mut maps = Maps::new(start.map, args.touch_threshold)?;
+            let mut maps = Maps::new(start.map, &settings)?;
             if contact_was.is_some() || frontier_was.is_some() {
                 let both = maps.restore(frontier_was.as_deref(), contact_was.as_deref());
                 tracing::info!(both, "took over the running grids");
@@ -59,5 +59,6 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             grid_out.publish(k, origin, |grid| maps.frontier.write(grid))?;
             Ok(())
         },
+        |maps, new| maps.set_settings(new).map_err(|e| e.to_string()),
     )
 }

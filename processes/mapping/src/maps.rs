@@ -1,6 +1,6 @@
 //! Both grids of the mapping process, built together from one step's readings.
 
-use crate::{ContactGrid, FrontierGrid, MappingError};
+use crate::{ContactGrid, FrontierGrid, MappingError, Settings};
 use mole_types::{Grid, Pose2, Scan, Tactile, WorldMap};
 
 /// The frontier grid and the contact grid of one arena, and what one step adds to them.
@@ -13,14 +13,21 @@ pub struct Maps {
 }
 
 impl Maps {
-    /// Empty grids over the arena of `map`, at its grid resolution.
-    pub fn new(map: &WorldMap, touch_threshold: f64) -> Result<Maps, MappingError> {
+    /// New settings from the next step on (`mole param set`).
+    pub fn set_settings(&mut self, settings: &Settings) -> Result<(), MappingError> {
+        self.frontier.set_params(settings.log_odds)?;
+        self.touch_threshold = settings.touch_threshold;
+        Ok(())
+    }
+
+    /// Empty grids over the arena of `map`, at its grid resolution, built as `settings` say.
+    pub fn new(map: &WorldMap, settings: &Settings) -> Result<Maps, MappingError> {
         let (w, h, res) = (map.arena_width, map.arena_height, map.grid_resolution);
         Ok(Maps {
-            frontier: FrontierGrid::new(w, h, res)?,
+            frontier: FrontierGrid::with_params(w, h, res, settings.log_odds)?,
             contact: ContactGrid::new(w, h, res)?,
             robot_radius: map.robot.radius,
-            touch_threshold,
+            touch_threshold: settings.touch_threshold,
         })
     }
 

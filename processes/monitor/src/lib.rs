@@ -789,6 +789,8 @@ impl Monitor {
             swaps: Vec::new(),
             faults: Vec::new(),
             launcher_wall_time_s: None,
+            settings: serde_json::Value::Null,
+            settings_changes: serde_json::Value::Null,
         }
     }
 

@@ -138,6 +138,13 @@ pub struct Summary {
     /// The launcher's part: from its start to the end of the stack (`null` until it wrote it).
     #[serde(default)]
     pub launcher_wall_time_s: Option<f64>,
+    /// The launcher's part: every role's settings in force at the start (docs/settings.md).
+    #[serde(default)]
+    pub settings: serde_json::Value,
+    /// The launcher's part: every setting changed while the stack ran (`mole param set`), each
+    /// with the step its process took it before: `[{tick, role, key, value}]`.
+    #[serde(default)]
+    pub settings_changes: serde_json::Value,
 }
 
 /// One `mole swap`: what the launcher measured while the new process took the role over.

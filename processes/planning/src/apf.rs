@@ -17,13 +17,16 @@
 use crate::distance_field::DistanceField;
 use crate::random_walk::{RandomWalk, RandomWalkConfig};
 use crate::{Command, Planner, PlannerInput, RobotLimits, usable};
+use mole_types::Setting;
 use mole_types::{
     MODE_ARRIVED, MODE_ESCAPE, MODE_GOAL, MODE_STALLED, PlanStatus, PlannerKind, STATUS_HAS_GOAL,
     Square, wrap_angle,
 };
+use serde::{Deserialize, Serialize};
 
 /// Which APF formulas to use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, Setting)]
+#[serde(rename_all = "kebab-case")]
 pub enum ApfForm {
     /// Algorithms §1 as written (atan, '+1' in h, 1/(δ+Σ(g+|g|)) boundary).
     Source,
@@ -133,35 +136,48 @@ pub fn f_walls(p: [f64; 2], arena: [f64; 4], radius: f64, rho0: f64, eta: f64) -
 }
 
 /// Settings of the APF planner.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct ApfConfig {
     /// Formulas.
     pub form: ApfForm,
     /// Attraction gain c.
+    #[setting(min = 0.0)]
     pub c: f64,
     /// Repulsion gain η (FIRAS).
+    #[setting(min = 0.0)]
     pub eta: f64,
     /// Influence distance ρ0 (m) of the barriers.
+    #[setting(above = 0.0)]
     pub rho0: f64,
     /// φ_max of the source's obstacle potential.
+    #[setting(above = 0.0)]
     pub phi_max: f64,
     /// δ of the source's boundary potential.
+    #[setting(above = 0.0)]
     pub delta: f64,
     /// The goal counts as reached within this distance (m).
+    #[setting(above = 0.0)]
     pub goal_tolerance: f64,
     /// Heading gain (1/s): ω = k·(θ_F − θ).
+    #[setting(above = 0.0)]
     pub k_heading: f64,
     /// Stall: the best distance to the goal improved by less than this (m)...
+    #[setting(min = 0.0)]
     pub stall_epsilon: f64,
     /// ...over this long (s).
+    #[setting(above = 0.0)]
     pub stall_window: f64,
     /// Oscillation: this many sign flips of the heading error within `stall_window`.
     pub oscillation_flips: u32,
     /// Length of the random-walk escape burst (s).
+    #[setting(min = 0.0)]
     pub escape_time: f64,
     /// Height of the repulsive mark left at a stall point (FIRAS gain of the mark).
+    #[setting(min = 0.0)]
     pub mark_eta: f64,
     /// Influence radius (m) of a stall mark.
+    #[setting(min = 0.0)]
     pub mark_radius: f64,
 }
 
@@ -361,9 +377,29 @@ impl Apf {
     }
 }
 
+impl crate::Registered for Apf {
+    fn build(
+        settings: &crate::Settings,
+        limits: RobotLimits,
+        goal: Option<[f64; 2]>,
+        _local: Option<Box<dyn Planner>>,
+        seed: u64,
+    ) -> Result<Self, crate::PlanningError> {
+        let goal = goal.ok_or(crate::PlanningError::MissingGoal {
+            kind: PlannerKind::Apf,
+        })?;
+        Ok(Apf::new(limits, settings.apf, goal, seed))
+    }
+}
+
 impl Planner for Apf {
     fn kind(&self) -> PlannerKind {
         PlannerKind::Apf
+    }
+
+    fn set_settings(&mut self, settings: &crate::Settings) -> Result<(), String> {
+        self.config = settings.apf;
+        Ok(())
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {

@@ -12,7 +12,9 @@
 use crate::obstacles::{contact_force, free_travel, freest_direction, nearest_obstacle};
 use crate::{Command, DwaConfig, Planner, PlannerInput, RobotLimits, usable};
 use core::f64::consts::{FRAC_PI_2, FRAC_PI_3, PI};
+use mole_types::Setting;
 use mole_types::{MODE_BOUNCE_BACK, PlannerKind, wrap_angle};
+use serde::{Deserialize, Serialize};
 
 /// Algorithms §4.1: the bounced velocity (v_x, v_y)(t+1) = −α·(v_x, v_y)(t), α ∈ (0, 1].
 pub fn bounce_back_velocity(v: [f64; 2], alpha: f64) -> [f64; 2] {
@@ -49,45 +51,70 @@ pub fn bounce_back_position(
 /// σ = 0.01 m (`sensors.lidar.range_std`).
 pub const TRIGGER_NOISE: f64 = 0.03;
 
-/// Settings of the bounce-back layer.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// d_th when the settings leave it to the layer, not under the DWA (m).
+const DEFAULT_D_TH: f64 = 0.15;
+/// d_release − d_th when the settings leave d_release to the layer, not under the DWA (m).
+const DEFAULT_HYSTERESIS: f64 = 0.2;
+/// d_release − d_th under the DWA (m).
+const HYSTERESIS_UNDER_DWA: f64 = 0.09;
+
+/// Settings of the bounce-back layer (`[planning.bounce-back]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct BounceBackConfig {
-    /// Trigger threshold d_th on d_obs (m).
-    pub d_th: f64,
-    /// Re-arm threshold d_release > d_th (m): the hysteresis band is [d_th, d_release].
-    pub d_release: f64,
+    /// Trigger threshold d_th on d_obs (m). Unset: 0.15 m, and under the DWA (`dwa`,
+    /// `frontier`) 0.03 m below the closest gap the DWA drives to.
+    #[setting(min = 0.0)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub d_th: Option<f64>,
+    /// Re-arm threshold d_release > d_th (m): the hysteresis band is [d_th, d_release]. Unset:
+    /// d_th + 0.2 m, under the DWA d_th + 0.09 m.
+    #[setting(min = 0.0)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub d_release: Option<f64>,
     /// The trigger re-arms anyway this long (s) after a bounce-back ended.
+    #[setting(min = 0.0)]
     pub cooldown: f64,
     /// α ∈ (0, 1]: reverse at α·|v|.
+    #[setting(above = 0.0, max = 1.0)]
     pub alpha: f64,
     /// Reverse at least this fast (m/s), so a bounce from standstill still backs off.
+    #[setting(min = 0.0)]
     pub min_reverse_speed: f64,
     /// How long to reverse (s).
+    #[setting(min = 0.0)]
     pub reverse_time: f64,
     /// Turn until the heading is within this of the freest direction (rad)...
+    #[setting(above = 0.0)]
     pub turn_tolerance: f64,
     /// ...or for at most this long (s).
+    #[setting(min = 0.0)]
     pub turn_timeout: f64,
     /// Proportional heading gain of the turn (1/s).
+    #[setting(above = 0.0)]
     pub k_heading: f64,
     /// A tactile sensor touches when its |f| exceeds this (N).
+    #[setting(min = 0.0)]
     pub force_threshold: f64,
     /// d_obs looks at the beams within this angle (rad) of the direction of travel; π takes
     /// every beam (the source's form), which lets walls beside the robot trigger it.
+    #[setting(above = 0.0, max = PI)]
     pub sector_half_angle: f64,
     /// Half-width (rad) of the neighbourhood whose shortest beam scores a direction as free.
+    #[setting(min = 0.0)]
     pub free_window: f64,
     /// Between bounces, cap the wrapped planner's speed so it can brake to a stop d_stop (m)
     /// short of the first obstacle in its path: the source flips v at once, a robot with an acceleration
     /// limit cannot, so without the cap it would hit before the reversal takes hold.
+    #[setting(min = 0.0)]
     pub d_stop: f64,
 }
 
 impl Default for BounceBackConfig {
     fn default() -> Self {
         Self {
-            d_th: 0.15,
-            d_release: 0.35,
+            d_th: None,
+            d_release: None,
             cooldown: 3.0,
             alpha: 0.5,
             min_reverse_speed: 0.1,
@@ -104,18 +131,31 @@ impl Default for BounceBackConfig {
 }
 
 impl BounceBackConfig {
-    /// The reactive layer under the DWA `dwa`, its last resort only (algorithms §4): the range
-    /// trigger d_th sits [`TRIGGER_NOISE`] below the closest gap the DWA drives to
-    /// ([`DwaConfig::closest_approach`]), so the DWA alone never drives where it fires (a DWA
-    /// margin under the noise leaves the touch alone); it re-arms 0.09 m further out (0.12 m at
-    /// the default margin). The rest is the default.
-    pub fn under_dwa(dwa: &DwaConfig) -> Self {
-        let d_th = (dwa.closest_approach() - TRIGGER_NOISE).max(0.0);
+    /// The reactive layer under the DWA `dwa`, its last resort only (algorithms §4): unless the
+    /// settings say otherwise, the range trigger d_th sits [`TRIGGER_NOISE`] below the closest
+    /// gap the DWA drives to ([`DwaConfig::closest_approach`]), so the DWA alone never drives
+    /// where it fires (a DWA margin under the noise leaves the touch alone); it re-arms 0.09 m
+    /// further out (0.12 m at the default margin).
+    #[must_use]
+    pub fn under_dwa(self, dwa: &DwaConfig) -> Self {
+        let d_th = self
+            .d_th
+            .unwrap_or((dwa.closest_approach() - TRIGGER_NOISE).max(0.0));
         Self {
-            d_th,
-            d_release: d_th + 0.09,
-            ..Self::default()
+            d_th: Some(d_th),
+            d_release: Some(self.d_release.unwrap_or(d_th + HYSTERESIS_UNDER_DWA)),
+            ..self
         }
+    }
+
+    /// d_th (m), as set or by default.
+    pub fn d_th(&self) -> f64 {
+        self.d_th.unwrap_or(DEFAULT_D_TH)
+    }
+
+    /// d_release (m), as set or by default.
+    pub fn d_release(&self) -> f64 {
+        self.d_release.unwrap_or(self.d_th() + DEFAULT_HYSTERESIS)
     }
 
     /// The config with every non-finite or out-of-range field replaced by its default
@@ -124,16 +164,16 @@ impl BounceBackConfig {
         let d = Self::default();
         let pos = |x: f64, def: f64| if x.is_finite() && x > 0.0 { x } else { def };
         let non_neg = |x: f64, def: f64| if x.is_finite() && x >= 0.0 { x } else { def };
-        let d_th = non_neg(self.d_th, d.d_th);
-        let d_release = non_neg(self.d_release, d.d_release);
+        let d_th = non_neg(self.d_th(), DEFAULT_D_TH);
+        let d_release = non_neg(self.d_release(), d_th + DEFAULT_HYSTERESIS);
         let d_release = if d_release > d_th {
             d_release
         } else {
-            d_th + (d.d_release - d.d_th)
+            d_th + DEFAULT_HYSTERESIS
         };
         Self {
-            d_th,
-            d_release,
+            d_th: Some(d_th),
+            d_release: Some(d_release),
             cooldown: pos(self.cooldown, d.cooldown),
             alpha: pos(self.alpha, d.alpha).min(1.0),
             min_reverse_speed: non_neg(self.min_reverse_speed, d.min_reverse_speed),
@@ -300,6 +340,13 @@ impl<P: Planner> Planner for BounceBack<P> {
         self.inner.kind()
     }
 
+    /// The layer's own settings as its planner takes it, then the planner's.
+    fn set_settings(&mut self, settings: &crate::Settings) -> Result<(), String> {
+        self.inner.set_settings(settings)?;
+        self.config = crate::bounce_back_of(self.inner.kind(), settings);
+        Ok(())
+    }
+
     fn step(&mut self, input: &PlannerInput) -> Command {
         if !usable(input) {
             return Command::STOP;
@@ -319,7 +366,7 @@ impl<P: Planner> Planner for BounceBack<P> {
 
         // Hysteresis: re-arm above d_release, or after the cooldown.
         if let Phase::Disarmed { since } = self.phase
-            && (d_ahead > self.config.d_release
+            && (d_ahead > self.config.d_release()
                 || Self::elapsed(tick, since, dt) >= self.config.cooldown)
         {
             self.phase = Phase::Armed;
@@ -331,7 +378,7 @@ impl<P: Planner> Planner for BounceBack<P> {
             Phase::Armed if touch_angle.is_some() => {
                 self.trigger(input, touch_angle.unwrap_or(travel), touch);
             }
-            Phase::Armed if moving && d_ahead < self.config.d_th => {
+            Phase::Armed if moving && d_ahead < self.config.d_th() => {
                 self.trigger(input, obstacle_angle, touch)
             }
             Phase::Disarmed { .. } if touch_ahead => {

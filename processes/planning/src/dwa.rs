@@ -19,10 +19,12 @@
 use crate::distance_field::DistanceField;
 use crate::global_path::{GlobalPath, path_distance};
 use crate::{Command, Planner, PlannerInput, RobotLimits, usable};
+use mole_types::Setting;
 use mole_types::{
     Grid, MODE_ARRIVED, MODE_ESCAPE, MODE_GOAL, PlanStatus, PlannerKind, STATUS_HAS_GOAL,
     wrap_angle,
 };
+use serde::{Deserialize, Serialize};
 
 /// Rollouts step by `sim_dt` up to this time (s), by 2 × `sim_dt` beyond.
 const FINE_HORIZON: f64 = 1.0;
@@ -55,7 +57,8 @@ fn rotations(w: f64, dt: f64) -> [(f64, f64); MAX_K + 1] {
 const PATH_CRITIC_POINTS: usize = 6;
 
 /// The cost a [`Dwa`] minimises.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, Setting)]
+#[serde(rename_all = "kebab-case")]
 pub enum DwaCost {
     /// Weighted critics over a multi-step rollout (the default).
     #[default]
@@ -68,17 +71,23 @@ pub enum DwaCost {
 }
 
 /// Critic weights (Nav2 DWB style): the total cost is Σ weight·critic.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct Critics {
     /// Goal distance: distance (m) from the rollout's end to the goal.
+    #[setting(min = 0.0)]
     pub goal: f64,
     /// Goal heading: |angle| (rad) between the end heading and the direction to the goal.
+    #[setting(min = 0.0)]
     pub heading: f64,
     /// Obstacle clearance: (cap − min(clearance, cap))/cap ∈ [0, 1] over the rollout.
+    #[setting(min = 0.0)]
     pub obstacle: f64,
     /// Velocity: (v_max − v)/v_max, prefer going fast.
+    #[setting(min = 0.0)]
     pub velocity: f64,
     /// Path following: distance (m) from the rollout's end to the path (its next segments).
+    #[setting(min = 0.0)]
     pub path: f64,
 }
 
@@ -94,8 +103,10 @@ impl Default for Critics {
     }
 }
 
-/// How the window is sampled.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// How the window is sampled: `{ count = { nv = 11, nw = 21 } }` or
+/// `{ resolution = { v_res = 0.01, w_res = 0.02 } }`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Sampling {
     /// `nv × nw` samples spread evenly over the window, endpoints included.
     Count { nv: usize, nw: usize },
@@ -103,8 +114,43 @@ pub enum Sampling {
     Resolution { v_res: f64, w_res: f64 },
 }
 
+impl mole_types::settings::Setting for Sampling {
+    fn kind() -> String {
+        "`{ count = { nv = …, nw = … } }` (≥ 1 each) or `{ resolution = { v_res = …, w_res = … } }` \
+         (> 0 each)"
+            .to_owned()
+    }
+
+    fn check_at(&self, at: &str) -> Result<(), mole_types::settings::SettingError> {
+        let ok = match *self {
+            Sampling::Count { nv, nw } => nv >= 1 && nw >= 1,
+            Sampling::Resolution { v_res, w_res } => {
+                v_res.is_finite() && w_res.is_finite() && v_res > 0.0 && w_res > 0.0
+            }
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(mole_types::settings::SettingError::new(
+                at,
+                "counts of at least 1, or resolutions above 0",
+                self,
+            ))
+        }
+    }
+
+    fn keys_at(
+        at: &str,
+        about: mole_types::settings::About,
+        out: &mut Vec<mole_types::settings::Key>,
+    ) {
+        out.push(mole_types::settings::Key::leaf::<Self>(at, about));
+    }
+}
+
 /// Settings of the DWA.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct DwaConfig {
     /// The cost.
     pub cost: DwaCost,
@@ -113,37 +159,49 @@ pub struct DwaConfig {
     /// Sampling of the window.
     pub sampling: Sampling,
     /// Horizon T_H (s).
+    #[setting(above = 0.0)]
     pub predict_time: f64,
     /// Rollout step (s).
+    #[setting(above = 0.0)]
     pub sim_dt: f64,
     /// Time over which the acceleration limits bound the window (s).
+    #[setting(above = 0.0)]
     pub window_dt: f64,
     /// Lowest linear speed (m/s); 0 = no reversing (bounce-back reverses).
     pub min_speed: f64,
     /// Clearances above this (m) cost nothing in the obstacle critic.
+    #[setting(above = 0.0)]
     pub clearance_cap: f64,
     /// Extra margin (m) over the robot radius that a rollout must keep. The grid's squares
     /// contain the surface, so a gap reads up to a cell (0.05 m) narrower than it is: 0.05 m
     /// leaves passable what the world families guarantee (0.1 m to spare each side), where
     /// 0.07 m had the DWA circle in front of some of those gaps.
+    #[setting(min = 0.0)]
     pub safety_margin: f64,
     /// The goal counts as reached within this distance (m).
+    #[setting(above = 0.0)]
     pub goal_tolerance: f64,
     /// Follow an A* path over the inflated grid toward the goal ([`GlobalPath`]) instead of
     /// heading straight for it (the `dwa` planner; ignored without a grid).
     pub global_path: bool,
     /// Carrot distance (m) along the global path: the goal and heading critics aim at it.
+    #[setting(above = 0.0)]
     pub lookahead: f64,
     /// Re-plan the global path at least every this many steps.
+    #[setting(min = 1)]
     pub replan_every: u64,
     /// Re-plan when the robot is farther than this (m) from the path.
+    #[setting(above = 0.0)]
     pub stray_distance: f64,
     /// Inflation (m) of the global path over the robot radius + `safety_margin`.
+    #[setting(min = 0.0)]
     pub inflation_margin: f64,
     /// A robot whose path left to the goal has not shrunk by `progress_epsilon` in this long
     /// (s) closes the tightest spot just ahead on its path and re-plans around it.
+    #[setting(above = 0.0)]
     pub no_progress_time: f64,
     /// Progress (m) along the global path that counts (see `no_progress_time`).
+    #[setting(min = 0.0)]
     pub progress_epsilon: f64,
 }
 
@@ -381,21 +439,26 @@ pub struct DwaChoice {
     pub window: [f64; 4],
 }
 
+/// Rollout steps as PythonRobotics counts them: `while t <= T_H: t += dt`.
+fn rollout_steps(config: &DwaConfig) -> usize {
+    let mut n = 0usize;
+    let mut t = 0.0;
+    let dt = if config.sim_dt > 0.0 {
+        config.sim_dt
+    } else {
+        0.1
+    };
+    while t <= config.predict_time && n < 10_000 {
+        n += 1;
+        t += dt;
+    }
+    n
+}
+
 impl Dwa {
     /// A DWA planner toward `goal`.
     pub fn new(limits: RobotLimits, config: DwaConfig, goal: [f64; 2]) -> Self {
-        // Rollout steps as PythonRobotics counts them: `while t <= T_H: t += dt`.
-        let mut n = 0usize;
-        let mut t = 0.0;
-        let dt = if config.sim_dt > 0.0 {
-            config.sim_dt
-        } else {
-            0.1
-        };
-        while t <= config.predict_time && n < 10_000 {
-            n += 1;
-            t += dt;
-        }
+        let n = rollout_steps(&config);
         Self {
             limits: limits.sanitized(),
             config,
@@ -441,7 +504,12 @@ impl Dwa {
 
     /// One step toward `carrot` with `path` (its next few segments) for the path critic:
     /// the path follower of the frontier planner and of the goal-seeking `dwa`.
-    pub fn track(&mut self, input: &PlannerInput, carrot: [f64; 2], path: &[[f64; 2]]) -> Command {
+    pub fn track_path(
+        &mut self,
+        input: &PlannerInput,
+        carrot: [f64; 2],
+        path: &[[f64; 2]],
+    ) -> Command {
         self.aim = carrot;
         self.path.clear();
         self.path
@@ -926,9 +994,39 @@ impl Dwa {
     }
 }
 
+impl crate::Registered for Dwa {
+    fn build(
+        settings: &crate::Settings,
+        limits: RobotLimits,
+        goal: Option<[f64; 2]>,
+        _local: Option<Box<dyn Planner>>,
+        _seed: u64,
+    ) -> Result<Self, crate::PlanningError> {
+        let goal = goal.ok_or(crate::PlanningError::MissingGoal {
+            kind: PlannerKind::Dwa,
+        })?;
+        Ok(Dwa::new(limits, settings.dwa, goal))
+    }
+
+    /// The last resort under the DWA: it fires only closer than the DWA ever drives.
+    fn bounce_back(settings: &crate::Settings) -> crate::BounceBackConfig {
+        settings.bounce_back.under_dwa(&settings.dwa)
+    }
+}
+
 impl Planner for Dwa {
     fn kind(&self) -> PlannerKind {
         PlannerKind::Dwa
+    }
+
+    fn set_settings(&mut self, settings: &crate::Settings) -> Result<(), String> {
+        self.config = settings.dwa;
+        self.n_steps = rollout_steps(&self.config);
+        Ok(())
+    }
+
+    fn track(&mut self, input: &PlannerInput, carrot: [f64; 2], path: &[[f64; 2]]) -> Command {
+        self.track_path(input, carrot, path)
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {

@@ -18,46 +18,59 @@
 //! that is reachable, not exhausted and not given up (algorithms §5, "complete"; `MODE_DONE`,
 //! `STATUS_EXPLORATION_COMPLETE`, zero wish).
 
-use crate::apf::{Apf, ApfConfig};
 use crate::distance_field::DistanceField;
-use crate::dwa::{Dwa, DwaConfig};
 use crate::global_path::GlobalPath;
 use crate::grid_search::GridSearch;
-use crate::{Command, LocalPlanner, Planner, PlannerInput, RobotLimits, usable};
+use crate::{Command, Planner, PlannerInput, RobotLimits, usable};
+use mole_types::Setting;
 use mole_types::{
     CELL_FREE, CELL_UNEXPLORED, Grid, MAX_GRID_CELLS, MAX_PATH, MODE_DONE, MODE_EXPLORE,
     PlanStatus, PlannerKind, STATUS_EXPLORATION_COMPLETE, STATUS_HAS_FRONTIER, STATUS_HAS_GOAL,
     wrap_angle,
 };
+use serde::{Deserialize, Serialize};
 
 /// Settings of the frontier planner.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct FrontierConfig {
     /// Clusters smaller than this (cells) are ignored.
+    #[setting(min = 1)]
     pub min_cluster: usize,
     /// Radius (m) of the information-gain window N(f).
+    #[setting(above = 0.0)]
     pub gain_radius: f64,
     /// α: weight of the information gain.
+    #[setting(min = 0.0)]
     pub alpha: f64,
     /// β: weight of the path length.
+    #[setting(min = 0.0)]
     pub beta: f64,
     /// Re-select at least every this many steps.
+    #[setting(min = 1)]
     pub reselect_every: u64,
     /// The frontier counts as reached within this distance (m).
+    #[setting(above = 0.0)]
     pub reached_distance: f64,
     /// Carrot distance (m) along the path.
+    #[setting(above = 0.0)]
     pub lookahead: f64,
     /// Extra inflation (m) over the robot radius (above the DWA's hard margin, so that the
     /// path leaves the local planner room).
+    #[setting(min = 0.0)]
     pub inflation_margin: f64,
     /// Selections in a row without a reachable frontier before exploration is declared done.
+    #[setting(min = 1)]
     pub done_after: u32,
     /// APPROACH (m): coming this much closer to the target (along its path) than ever is
     /// progress (algorithms §5.3, "give up").
+    #[setting(above = 0.0)]
     pub approach: f64,
     /// A target with neither approach nor new area for this long (s) is given up (§5.3).
+    #[setting(above = 0.0)]
     pub give_up_s: f64,
     /// Frontier cells within this distance (m) of a target given up are no frontier any more.
+    #[setting(min = 0.0)]
     pub give_up_radius: f64,
 }
 
@@ -488,13 +501,12 @@ impl FrontierSelector {
 }
 
 /// The frontier planner (algorithms §5) with a local planner following the path.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct FrontierExplorer {
     config: FrontierConfig,
-    local: LocalPlanner,
+    /// The goal seeker that follows the path (`--local-planner`, [`Planner::track`]).
+    local: Box<dyn Planner>,
     selector: FrontierSelector,
-    dwa: Dwa,
-    apf: Apf,
     chosen: Option<Frontier>,
     /// The chosen frontier's path, followed with a carrot (shared with the `dwa` planner).
     follow: GlobalPath,
@@ -527,21 +539,12 @@ const NEW_AREA_CELLS: u32 = 10;
 
 impl FrontierExplorer {
     /// A frontier explorer with `local` following the path.
-    pub fn new(
-        limits: RobotLimits,
-        config: FrontierConfig,
-        local: LocalPlanner,
-        dwa: DwaConfig,
-        apf: ApfConfig,
-        seed: u64,
-    ) -> Self {
+    pub fn new(limits: RobotLimits, config: FrontierConfig, local: Box<dyn Planner>) -> Self {
         let limits = limits.sanitized();
         Self {
             config,
             local,
             selector: FrontierSelector::new(config, limits.radius),
-            dwa: Dwa::new(limits, dwa, [0.0, 0.0]),
-            apf: Apf::new(limits, apf, [0.0, 0.0], seed),
             chosen: None,
             follow: GlobalPath::new(),
             last_select: None,
@@ -647,9 +650,35 @@ impl FrontierExplorer {
     }
 }
 
+impl crate::Registered for FrontierExplorer {
+    fn build(
+        settings: &crate::Settings,
+        limits: RobotLimits,
+        _goal: Option<[f64; 2]>,
+        local: Option<Box<dyn Planner>>,
+        _seed: u64,
+    ) -> Result<Self, crate::PlanningError> {
+        let local = local.ok_or(crate::PlanningError::NotAFollower {
+            kind: PlannerKind::Frontier,
+        })?;
+        Ok(FrontierExplorer::new(limits, settings.frontier, local))
+    }
+
+    /// The DWA follows its paths by default: the reactive layer is set as under the DWA.
+    fn bounce_back(settings: &crate::Settings) -> crate::BounceBackConfig {
+        settings.bounce_back.under_dwa(&settings.dwa)
+    }
+}
+
 impl Planner for FrontierExplorer {
     fn kind(&self) -> PlannerKind {
         PlannerKind::Frontier
+    }
+
+    fn set_settings(&mut self, settings: &crate::Settings) -> Result<(), String> {
+        self.local.set_settings(settings)?;
+        (self.config, self.selector.config) = (settings.frontier, settings.frontier);
+        Ok(())
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {
@@ -714,13 +743,7 @@ impl Planner for FrontierExplorer {
         } else if self.chosen.is_some() {
             let carrot = self.carrot(p);
             self.carrot = Some(carrot);
-            let c = match self.local {
-                LocalPlanner::Dwa => self.dwa.track(input, carrot, self.follow.remaining()),
-                LocalPlanner::Apf => {
-                    self.apf.set_goal(carrot, None);
-                    self.apf.step(input)
-                }
-            };
+            let c = self.local.track(input, carrot, self.follow.remaining());
             Command {
                 mode: if c.mode == mole_types::MODE_STALLED || c.mode == mole_types::MODE_ESCAPE {
                     c.mode
@@ -742,7 +765,7 @@ impl Planner for FrontierExplorer {
 
     fn replan(&mut self) {
         self.chosen = None;
-        self.apf.replan();
+        self.local.replan();
     }
 
     fn target(&self) -> Option<[f64; 2]> {
@@ -787,6 +810,15 @@ mod tests {
             max_accel: 2.0,
             max_alpha: 8.0,
         }
+    }
+
+    /// The DWA with default settings, as frontier's follower.
+    fn dwa_follower() -> Box<dyn Planner> {
+        Box::new(crate::Dwa::new(
+            limits(),
+            crate::DwaConfig::default(),
+            [0.0, 0.0],
+        ))
     }
 
     #[test]
@@ -898,14 +930,7 @@ mod tests {
     }
 
     fn explorer() -> FrontierExplorer {
-        FrontierExplorer::new(
-            limits(),
-            FrontierConfig::default(),
-            LocalPlanner::Dwa,
-            DwaConfig::default(),
-            ApfConfig::default(),
-            1,
-        )
+        FrontierExplorer::new(limits(), FrontierConfig::default(), dwa_follower())
     }
 
     /// Half a room unexplored, its frontier 1.5 m away and reachable: never done while the
@@ -1056,14 +1081,7 @@ mod tests {
     #[test]
     fn explored_map_means_done_with_a_zero_command_and_the_flag() {
         let g = grid_free(40, 40, 0.1);
-        let mut e = FrontierExplorer::new(
-            limits(),
-            FrontierConfig::default(),
-            LocalPlanner::Dwa,
-            DwaConfig::default(),
-            ApfConfig::default(),
-            1,
-        );
+        let mut e = FrontierExplorer::new(limits(), FrontierConfig::default(), dwa_follower());
         let mut c = Command::STOP;
         for tick in 0..400 {
             let input = PlannerInput {

@@ -7,20 +7,18 @@
 //! built up front, so switching allocates nothing; both read the robot's velocity from the
 //! command sent last, whichever planner made it.
 
-use crate::apf::{Apf, ApfConfig};
-use crate::dwa::{Dwa, DwaConfig};
-use crate::{Command, LocalPlanner, Planner, PlannerInput, RobotLimits};
+use crate::{Command, Planner, PlannerInput};
 use mole_types::{PlanStatus, PlannerKind};
 
-/// A goal-seeking planner whose re-planning after a bounce is APF or DWA. See the module docs.
-#[derive(Debug, Clone)]
+/// A goal-seeking planner whose re-planning after a bounce is another goal seeker's (APF or
+/// DWA). See the module docs.
+#[derive(Debug)]
 pub struct GoalSeeker {
-    primary: LocalPlanner,
-    replanner: LocalPlanner,
+    primary: Box<dyn Planner>,
+    replanner: Box<dyn Planner>,
     replan_time: f64,
-    dwa: Dwa,
-    apf: Apf,
-    active: LocalPlanner,
+    /// Whether the re-planner drives now.
+    replanning: bool,
     /// Seconds the re-planner still drives.
     remaining: f64,
     pending: bool,
@@ -29,20 +27,9 @@ pub struct GoalSeeker {
 }
 
 impl GoalSeeker {
-    /// `primary` toward `goal`; after a bounce `replanner` drives for `replan_time` s
-    /// (non-finite or negative: 0, i.e. the primary re-plans at once).
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        limits: RobotLimits,
-        goal: [f64; 2],
-        primary: LocalPlanner,
-        replanner: LocalPlanner,
-        replan_time: f64,
-        dwa: DwaConfig,
-        apf: ApfConfig,
-        seed: u64,
-    ) -> Self {
-        let limits = limits.sanitized();
+    /// `primary` toward its goal; after a bounce `replanner` (toward the same goal) drives for
+    /// `replan_time` s (non-finite or negative: 0, i.e. the primary re-plans at once).
+    pub fn new(primary: Box<dyn Planner>, replanner: Box<dyn Planner>, replan_time: f64) -> Self {
         Self {
             primary,
             replanner,
@@ -51,102 +38,99 @@ impl GoalSeeker {
             } else {
                 0.0
             },
-            dwa: Dwa::new(limits, dwa, goal),
-            apf: Apf::new(limits, apf, goal, seed),
-            active: primary,
+            replanning: false,
             remaining: 0.0,
             pending: false,
             warmed: false,
         }
     }
 
-    /// The local planner driving now.
-    pub fn active(&self) -> LocalPlanner {
-        self.active
+    /// The planner driving now.
+    pub fn active(&self) -> PlannerKind {
+        self.driving().kind()
     }
 
-    fn planner(&mut self, which: LocalPlanner) -> &mut dyn Planner {
-        match which {
-            LocalPlanner::Dwa => &mut self.dwa,
-            LocalPlanner::Apf => &mut self.apf,
+    fn driving(&self) -> &dyn Planner {
+        if self.replanning {
+            &*self.replanner
+        } else {
+            &*self.primary
         }
     }
 }
 
 impl Planner for GoalSeeker {
     fn kind(&self) -> PlannerKind {
-        match self.primary {
-            LocalPlanner::Dwa => PlannerKind::Dwa,
-            LocalPlanner::Apf => PlannerKind::Apf,
-        }
+        self.primary.kind()
+    }
+
+    fn set_settings(&mut self, settings: &crate::Settings) -> Result<(), String> {
+        self.primary.set_settings(settings)?;
+        self.replanner.set_settings(settings)?;
+        self.replan_time = settings.replan_time;
+        Ok(())
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {
         if !self.warmed && input.grid.is_some() {
             // Size the re-planner's buffers now, not on its first turn in steady state.
             self.warmed = true;
-            let r = self.replanner;
-            if r != self.primary {
-                self.planner(r).step(input);
-                self.planner(r).replan();
-            }
+            self.replanner.step(input);
+            self.replanner.replan();
         }
         if self.pending {
             self.pending = false;
-            self.active = self.replanner;
+            self.replanning = true;
             self.remaining = self.replan_time;
-            let r = self.replanner;
-            self.planner(r).replan();
+            self.replanner.replan();
         }
-        if self.active != self.primary {
+        if self.replanning {
             if self.remaining <= 0.0 {
-                self.active = self.primary;
-                let p = self.primary;
-                self.planner(p).replan();
+                self.replanning = false;
+                self.primary.replan();
             } else if input.dt.is_finite() && input.dt > 0.0 {
                 self.remaining -= input.dt;
             }
         }
-        let a = self.active;
-        self.planner(a).step(input)
+        if self.replanning {
+            self.replanner.step(input)
+        } else {
+            self.primary.step(input)
+        }
     }
 
     fn replan(&mut self) {
-        if self.replanner == self.primary || self.replan_time <= 0.0 {
-            let p = self.primary;
-            self.planner(p).replan();
+        if self.replan_time <= 0.0 {
+            self.primary.replan();
         } else {
             self.pending = true;
         }
     }
 
     fn obstacle_hint(&mut self, at: [f64; 2], heading: f64) {
-        self.dwa.obstacle_hint(at, heading);
-        self.apf.obstacle_hint(at, heading);
+        self.primary.obstacle_hint(at, heading);
+        self.replanner.obstacle_hint(at, heading);
     }
 
     fn target(&self) -> Option<[f64; 2]> {
-        Some(self.dwa.goal())
+        self.primary.target()
     }
 
-    /// Both local planners head for the new goal, whichever drives now.
+    /// Both planners head for the new goal, whichever drives now.
     fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
-        self.dwa.set_goal(goal, tolerance) & self.apf.set_goal(goal, tolerance)
+        self.primary.set_goal(goal, tolerance) & self.replanner.set_goal(goal, tolerance)
     }
 
     fn write_status(&self, status: &mut PlanStatus) {
-        match self.active {
-            LocalPlanner::Dwa => self.dwa.write_status(status),
-            LocalPlanner::Apf => self.apf.write_status(status),
-        }
+        self.driving().write_status(status);
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Limited;
     use crate::obstacles::test_support::grid_free;
+    use crate::{Limited, RobotLimits};
 
     #[test]
     fn the_replanner_drives_after_a_bounce_then_hands_back() {
@@ -159,14 +143,18 @@ mod tests {
         };
         let g = grid_free(60, 60, 0.05);
         let seeker = GoalSeeker::new(
-            limits,
-            [2.5, 2.5],
-            LocalPlanner::Dwa,
-            LocalPlanner::Apf,
+            Box::new(crate::Dwa::new(
+                limits,
+                crate::DwaConfig::default(),
+                [2.5, 2.5],
+            )),
+            Box::new(crate::Apf::new(
+                limits,
+                crate::ApfConfig::default(),
+                [2.5, 2.5],
+                3,
+            )),
             1.0,
-            DwaConfig::default(),
-            ApfConfig::default(),
-            3,
         );
         // Whichever planner drives, the command sent stays within the acceleration limit of
         // the one sent before.
@@ -195,10 +183,10 @@ mod tests {
             active.push(s.inner().active());
         }
         assert_eq!(s.kind(), PlannerKind::Dwa);
-        assert!(active[..10].iter().all(|a| *a == LocalPlanner::Dwa));
+        assert!(active[..10].iter().all(|a| *a == PlannerKind::Dwa));
         // APF for 1 s = 20 steps (+1 for the hand-back step), then DWA again.
-        let apf = active.iter().filter(|a| **a == LocalPlanner::Apf).count();
+        let apf = active.iter().filter(|a| **a == PlannerKind::Apf).count();
         assert!((20..=22).contains(&apf), "{apf}");
-        assert_eq!(active.last(), Some(&LocalPlanner::Dwa));
+        assert_eq!(active.last(), Some(&PlannerKind::Dwa));
     }
 }

@@ -20,7 +20,9 @@ pub mod global_path;
 pub mod goal_seeker;
 pub mod grid_search;
 pub mod obstacles;
+pub mod operator;
 pub mod random_walk;
+pub mod settings;
 
 pub use apf::{Apf, ApfConfig, ApfForm};
 pub use distance_field::DistanceField;
@@ -29,9 +31,16 @@ pub use frontier::{FrontierConfig, FrontierExplorer};
 pub use global_path::{GlobalPath, PathKind};
 pub use goal_seeker::GoalSeeker;
 pub use grid_search::GridSearch;
+pub use operator::OperatorGoals;
 
 pub use bounce_back::{BounceBack, BounceBackConfig, PositionUpdate, bounce_back_position};
 pub use random_walk::{DiagonalStride, RandomWalk, RandomWalkConfig, WalkReport};
+pub use settings::Settings;
+
+/// docs/extending.md: its worked planner is compiled and run as a doctest of this crate.
+#[cfg(doctest)]
+#[doc = include_str!("../../../docs/extending.md")]
+pub struct ExtendingGuide;
 
 use mole_types::{
     Grid, MODE_IDLE, PlanStatus, PlannerKind, Pose2, RobotSpec, STATUS_HAS_GOAL, Scan, Tactile,
@@ -50,6 +59,12 @@ pub enum PlanningError {
         value: f64,
         /// What it must be.
         expected: &'static str,
+    },
+    /// A planner that drives to no goal cannot follow a path.
+    #[error("planner `{kind}` drives to no goal, so it cannot follow a path: expected one of {}", settings::goal_seekers().join(", "))]
+    NotAFollower {
+        /// The planner asked for.
+        kind: PlannerKind,
     },
     /// A goal-seeking planner was asked for without a goal.
     #[error("planner `{kind}` needs a goal: pass `--goal X,Y` (or give the scenario a [goal])")]
@@ -174,7 +189,7 @@ impl Command {
 }
 
 /// A motion planner: one command per step.
-pub trait Planner {
+pub trait Planner: core::fmt::Debug {
     /// The kind `--planner` selects it by.
     fn kind(&self) -> PlannerKind;
     /// The (v, ω) this planner wishes to drive this step and its mode. Only the outermost layer,
@@ -200,6 +215,18 @@ pub trait Planner {
     /// (apf, dwa) and took it; an explorer ignores goals and returns false.
     fn set_goal(&mut self, _goal: [f64; 2], _tolerance: Option<f64>) -> bool {
         false
+    }
+    /// One step toward `carrot` (world, m) along `path` (the next points of a path it follows):
+    /// how a goal seeker follows another planner's path (frontier's `--local-planner`). By
+    /// default the carrot is its goal for this step.
+    fn track(&mut self, input: &PlannerInput, carrot: [f64; 2], _path: &[[f64; 2]]) -> Command {
+        self.set_goal(carrot, None);
+        self.step(input)
+    }
+    /// Takes new settings while it runs (`mole param set`), keeping what it has (its goal,
+    /// path, phase); `Err` says why it cannot. By default a planner takes none.
+    fn set_settings(&mut self, _settings: &Settings) -> Result<(), String> {
+        Err(format!("{} takes no settings while it runs", self.kind()))
     }
     /// Fills `planning/status` (everything but the header) after a step: `mode` is left as the
     /// caller set it ([`Limited`] writes the mode of the command it sent); by default
@@ -239,6 +266,12 @@ impl<P: Planner + ?Sized> Planner for Box<P> {
     }
     fn set_goal(&mut self, goal: [f64; 2], tolerance: Option<f64>) -> bool {
         (**self).set_goal(goal, tolerance)
+    }
+    fn track(&mut self, input: &PlannerInput, carrot: [f64; 2], path: &[[f64; 2]]) -> Command {
+        (**self).track(input, carrot, path)
+    }
+    fn set_settings(&mut self, settings: &Settings) -> Result<(), String> {
+        (**self).set_settings(settings)
     }
     fn write_status(&self, status: &mut PlanStatus) {
         (**self).write_status(status)
@@ -341,6 +374,10 @@ impl<P: Planner> Planner for Limited<P> {
         self.inner.set_goal(goal, tolerance)
     }
 
+    fn set_settings(&mut self, settings: &Settings) -> Result<(), String> {
+        self.inner.set_settings(settings)
+    }
+
     /// The wrapped planner's status with the mode of the command sent.
     fn write_status(&self, status: &mut PlanStatus) {
         self.inner.write_status(status);
@@ -348,148 +385,155 @@ impl<P: Planner> Planner for Limited<P> {
     }
 }
 
-/// Which local planner drives the goal-seeking planners (the frontier follower, and the
-/// re-planning after a bounce-back, algorithms §4 "path re-planning: APF or DWA").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum LocalPlanner {
-    /// Dynamic window approach (algorithms §4.2).
-    #[default]
-    Dwa,
-    /// Artificial potential field (algorithms §1).
-    Apf,
-}
-
-/// What `--planner`, `--goal` and friends ask for; see [`build_planner`].
+/// What a run asks of the planning process (`--planner`, `--goal`, `--local-planner`, the
+/// seed); how each planner is tuned is its [`Settings`]. See [`build_planner`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannerConfig {
     /// Which planner.
     pub kind: PlannerKind,
-    /// Goal (world, m): required by `apf` and `dwa`.
+    /// Goal (world, m): required by the planners that drive to one (apf, dwa).
     pub goal: Option<(f64, f64)>,
     /// The goal counts as reached within this distance (m): the world's own tolerance
     /// (`WorldMap::goal_tolerance`), so that planner and world agree (the planner reports
-    /// `MODE_ARRIVED` [`ARRIVAL_MARGIN`] inside it). `None` keeps the APF's and DWA's default.
+    /// `MODE_ARRIVED` [`ARRIVAL_MARGIN`] inside it). `None` keeps the settings' tolerance.
     pub goal_tolerance: Option<f64>,
-    /// Local planner of `frontier`.
-    pub local: LocalPlanner,
+    /// The goal seeker that follows frontier's paths.
+    pub local: PlannerKind,
     /// Seed of every random stream.
     pub seed: u64,
-    /// The bounce-back layer's settings; for `dwa` and `frontier`,
-    /// [`BounceBackConfig::under_dwa`] of `dwa` (set both together).
-    pub bounce_back: BounceBackConfig,
-    /// APF settings (`apf`, and `frontier` with `local = Apf`).
-    pub apf: ApfConfig,
-    /// DWA settings (`dwa`, and `frontier` with `local = Dwa`).
-    pub dwa: DwaConfig,
-    /// Frontier settings.
-    pub frontier: FrontierConfig,
-    /// Random-walk settings.
-    pub random_walk: RandomWalkConfig,
-    /// Which local planner re-plans after a bounce-back for `apf` and `dwa` (algorithms §4 "path
-    /// re-planning: APF or DWA"); `None` = the planner itself (the default).
-    pub replan_with: Option<LocalPlanner>,
-    /// How long (s) `replan_with` drives after a bounce before handing back.
-    pub replan_time: f64,
+    /// Every planner's tuning.
+    pub settings: Settings,
 }
 
 impl PlannerConfig {
-    /// Defaults for planner `kind`.
+    /// Planner `kind` with the default settings, DWA following frontier's paths.
     pub fn new(kind: PlannerKind) -> Self {
         Self {
             kind,
             goal: None,
             goal_tolerance: None,
-            local: LocalPlanner::default(),
+            local: PlannerKind::Dwa,
             seed: 0,
-            // Under the DWA the reactive layer is the last resort only: it fires only closer
-            // than the DWA ever drives.
-            bounce_back: if matches!(kind, PlannerKind::Dwa | PlannerKind::Frontier) {
-                BounceBackConfig::under_dwa(&DwaConfig::default())
-            } else {
-                BounceBackConfig::default()
-            },
-            apf: ApfConfig::default(),
-            dwa: DwaConfig::default(),
-            frontier: FrontierConfig::default(),
-            random_walk: RandomWalkConfig::default(),
-            replan_with: None,
-            replan_time: 5.0,
+            settings: Settings::default(),
         }
+    }
+
+    /// With the run's goal (`goal`, else the world's) and the world's goal tolerance.
+    pub fn with_world_goal(mut self, map: &mole_types::WorldMap, goal: Option<(f64, f64)>) -> Self {
+        let has_goal = map.has_goal == 1;
+        self.goal = goal.or(has_goal.then_some((map.goal_x, map.goal_y)));
+        self.goal_tolerance = has_goal.then_some(map.goal_tolerance);
+        self
+    }
+
+    /// The settings with the world's goal tolerance in the goal seekers' when the planner is
+    /// one (what [`build_planner`] and [`Planner::set_settings`] take). An explorer's follower
+    /// keeps its own: it arrives at carrots, not at the world's goal.
+    pub fn tuned(&self) -> Settings {
+        let mut s = self.settings;
+        let world = self.goal_tolerance.filter(|t| t.is_finite() && *t > 0.0);
+        if let Some(t) = world.filter(|_| self.kind.needs_goal()) {
+            s.apf.goal_tolerance = t;
+            s.dwa.goal_tolerance = t;
+        }
+        s
     }
 }
 
+/// A planner the registry builds: one row of [`mole_types::planners!`] names its type.
+pub trait Registered: Planner + Sized + 'static {
+    /// Built with `settings` for a robot with `limits`; `goal` is given to a planner that needs
+    /// one (`PlannerKind::needs_goal`), `seed` seeds its random streams, and `local` is the goal
+    /// seeker that follows a path it plans.
+    fn build(
+        settings: &Settings,
+        limits: RobotLimits,
+        goal: Option<[f64; 2]>,
+        local: Option<Box<dyn Planner>>,
+        seed: u64,
+    ) -> Result<Self, PlanningError>;
+
+    /// The reactive layer under it: `[planning.bounce-back]` as set.
+    fn bounce_back(settings: &Settings) -> BounceBackConfig {
+        settings.bounce_back
+    }
+}
+
+/// [`build_planner`]'s dispatch, from the table of planners (`mole_types::planners!`).
+macro_rules! registry {
+    ($( $(#[$meta:meta])* $variant:ident = ($name:literal, $code:literal, $ty:ident, $needs:ident) ),+ $(,)?) => {
+        /// Planner `kind` alone, without the layers around it.
+        fn bare(
+            kind: PlannerKind,
+            settings: &Settings,
+            limits: RobotLimits,
+            goal: Option<[f64; 2]>,
+            local: Option<Box<dyn Planner>>,
+            seed: u64,
+        ) -> Result<Box<dyn Planner>, PlanningError> {
+            Ok(match kind {
+                $( PlannerKind::$variant => {
+                    Box::new(<$ty as Registered>::build(settings, limits, goal, local, seed)?)
+                } )+
+            })
+        }
+
+        /// The reactive layer under planner `kind`.
+        pub(crate) fn bounce_back_of(kind: PlannerKind, settings: &Settings) -> BounceBackConfig {
+            match kind {
+                $( PlannerKind::$variant => <$ty as Registered>::bounce_back(settings), )+
+            }
+        }
+    };
+}
+mole_types::planners!(registry);
+
 /// Builds the configured planner inside the bounce-back layer (algorithms §4) inside
-/// [`Limited`]: `random-walk` (§3), `apf` (§1) and `dwa` (§4.2) toward `config.goal` (an error
-/// naming `--goal X,Y` without one), `frontier` (§5) with `config.local` following the path.
+/// [`Limited`]: a goal seeker toward `config.goal` (an error naming `--goal X,Y` without one),
+/// re-planned after a bounce by `settings.replan_with` if set; an explorer with `config.local`
+/// following its paths.
 pub fn build_planner(
     config: &PlannerConfig,
     limits: RobotLimits,
 ) -> Result<Box<dyn Planner>, PlanningError> {
-    let goal = || {
-        config
-            .goal
-            .filter(|g| g.0.is_finite() && g.1.is_finite())
-            .map(|g| [g.0, g.1])
-            .ok_or(PlanningError::MissingGoal { kind: config.kind })
+    let settings = config.tuned();
+    let kind = config.kind;
+    let goal = match config.goal.filter(|g| g.0.is_finite() && g.1.is_finite()) {
+        Some(g) => Some([g.0, g.1]),
+        None if kind.needs_goal() => return Err(PlanningError::MissingGoal { kind }),
+        None => None,
     };
-    let bb = config.bounce_back;
-    // The goal seekers stop where the world counts the goal as reached.
-    let (mut apf, mut dwa) = (config.apf, config.dwa);
-    if let Some(t) = config.goal_tolerance.filter(|t| t.is_finite() && *t > 0.0) {
-        apf.goal_tolerance = t;
-        dwa.goal_tolerance = t;
-    }
-    let primary = match config.kind {
-        PlannerKind::Apf => LocalPlanner::Apf,
-        PlannerKind::Dwa => LocalPlanner::Dwa,
-        PlannerKind::RandomWalk => {
-            let walk = RandomWalk::new(limits, config.random_walk, config.seed);
-            return Ok(stack(walk, limits, bb));
+    // A path to follow is aimed at by its carrot, step by step: the follower's own goal is a
+    // placeholder until the first step.
+    let follower = |which: PlannerKind| {
+        if !which.needs_goal() {
+            return Err(PlanningError::NotAFollower { kind: which });
         }
-        PlannerKind::Frontier => {
-            let explorer = FrontierExplorer::new(
-                limits,
-                config.frontier,
-                config.local,
-                config.dwa,
-                config.apf,
-                config.seed,
-            );
-            return Ok(stack(explorer, limits, bb));
-        }
+        bare(
+            which,
+            &settings,
+            limits,
+            Some([0.0, 0.0]),
+            None,
+            config.seed,
+        )
     };
-    // `apf` / `dwa`, with another planner re-planning after a bounce if so configured.
-    Ok(match config.replan_with {
-        Some(with) if with != primary => {
-            let seeker = GoalSeeker::new(
-                limits,
-                goal()?,
-                primary,
-                with,
-                config.replan_time,
-                dwa,
-                apf,
-                config.seed,
-            );
-            stack(seeker, limits, bb)
+    let local = match kind.needs_range_sensor() {
+        true => Some(follower(config.local)?),
+        false => None,
+    };
+    let primary = bare(kind, &settings, limits, goal, local, config.seed)?;
+    let inner = match (goal, settings.replan_with) {
+        (Some(goal), Some(with)) if with != kind => {
+            let replanner = bare(with, &settings, limits, Some(goal), None, config.seed)?;
+            Box::new(GoalSeeker::new(primary, replanner, settings.replan_time))
         }
-        _ => match primary {
-            LocalPlanner::Apf => stack(Apf::new(limits, apf, goal()?, config.seed), limits, bb),
-            LocalPlanner::Dwa => stack(Dwa::new(limits, dwa, goal()?), limits, bb),
-        },
-    })
-}
-
-/// `inner` inside the bounce-back layer inside [`Limited`].
-fn stack<P: Planner + 'static>(
-    inner: P,
-    limits: RobotLimits,
-    bounce_back: BounceBackConfig,
-) -> Box<dyn Planner> {
-    Box::new(Limited::new(
-        BounceBack::new(inner, limits, bounce_back),
+        _ => primary,
+    };
+    Ok(Box::new(Limited::new(
+        BounceBack::new(inner, limits, bounce_back_of(kind, &settings)),
         limits,
-    ))
+    )))
 }
 
 /// Builds planner `kind` with every default and no goal (`apf` and `dwa` then fail with
@@ -551,14 +595,40 @@ mod tests {
         }
     }
 
+    /// Every kind, alone or re-planned by a goal seeker, takes new settings while it runs
+    /// (`mole param set`) and keeps its goal.
+    #[test]
+    fn every_kind_takes_new_settings_and_keeps_its_goal() {
+        let mut changed = Settings::default();
+        (
+            changed.dwa.critics.heading,
+            changed.apf.c,
+            changed.random_walk.stride,
+        ) = (0.4, 2.0, 0.6);
+        changed.frontier.alpha = 0.5;
+        for &kind in PlannerKind::ALL {
+            for replan_with in [None, Some(PlannerKind::Apf)] {
+                let mut config = PlannerConfig {
+                    goal: Some((1.0, 2.0)),
+                    ..PlannerConfig::new(kind)
+                };
+                config.settings.replan_with = replan_with.filter(|_| kind.needs_goal());
+                let mut p = build_planner(&config, limits()).unwrap_or_else(|e| panic!("{e}"));
+                let target = p.target();
+                assert_eq!(p.set_settings(&changed), Ok(()), "{kind}, {replan_with:?}");
+                assert_eq!(p.target(), target, "{kind}");
+            }
+        }
+    }
+
     /// Under the DWA the reactive layer fires only where the DWA never drives: its range trigger
     /// lies the lidar-noise allowance below the DWA's closest approach, for `dwa` and `frontier`.
     #[test]
     fn the_trigger_under_the_dwa_is_derived_from_its_margin() {
+        let settings = Settings::default();
         for kind in [PlannerKind::Dwa, PlannerKind::Frontier] {
-            let config = PlannerConfig::new(kind);
-            let d_th = config.bounce_back.d_th;
-            let closest = config.dwa.closest_approach();
+            let d_th = bounce_back_of(kind, &settings).d_th();
+            let closest = settings.dwa.closest_approach();
             assert!(d_th > 0.0, "{kind:?}: d_th {d_th}");
             assert!(
                 d_th + bounce_back::TRIGGER_NOISE <= closest + 1e-12,
@@ -569,12 +639,22 @@ mod tests {
             safety_margin: 0.2,
             ..DwaConfig::default()
         };
-        let bb = BounceBackConfig::under_dwa(&wide);
-        assert!((bb.d_th - (wide.closest_approach() - bounce_back::TRIGGER_NOISE)).abs() < 1e-12);
-        assert!(bb.d_release > bb.d_th);
+        let bb = BounceBackConfig::default().under_dwa(&wide);
+        assert!((bb.d_th() - (wide.closest_approach() - bounce_back::TRIGGER_NOISE)).abs() < 1e-12);
+        assert!(bb.d_release() > bb.d_th());
+        // A trigger the settings name stays as set.
+        let set = BounceBackConfig {
+            d_th: Some(0.2),
+            ..BounceBackConfig::default()
+        }
+        .under_dwa(&wide);
+        assert_eq!(set.d_th(), 0.2);
+        assert!((set.d_release() - 0.29).abs() < 1e-12);
+        assert_eq!(bounce_back_of(PlannerKind::Apf, &settings).d_th(), 0.15);
     }
 
     /// Always wishes full speed ahead.
+    #[derive(Debug)]
     struct FullAhead;
 
     impl Planner for FullAhead {
@@ -681,14 +761,14 @@ mod tests {
         let seekers = [
             (PlannerKind::Apf, None),
             (PlannerKind::Dwa, None),
-            (PlannerKind::Dwa, Some(LocalPlanner::Apf)),
+            (PlannerKind::Dwa, Some(PlannerKind::Apf)),
         ];
         for (kind, replan_with) in seekers {
-            let config = PlannerConfig {
+            let mut config = PlannerConfig {
                 goal: Some(old),
-                replan_with,
                 ..PlannerConfig::new(kind)
             };
+            config.settings.replan_with = replan_with;
             let build = || build_planner(&config, limits()).unwrap_or_else(|e| panic!("{e}"));
             let (mut redirected, mut left) = (build(), build());
             // Under way toward the old goal, heading +x.

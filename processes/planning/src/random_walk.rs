@@ -4,9 +4,11 @@
 use crate::obstacles::{corridor_clear, segment_free};
 use crate::{Command, Planner, PlannerInput, PlanningError, RobotLimits, usable};
 use core::f64::consts::{FRAC_PI_4, SQRT_2};
+use mole_types::Setting;
 use mole_types::{MODE_EXPLORE, PlannerKind, Pose2, wrap_angle};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
 
 fn check_probability(p: f64) -> Result<(), PlanningError> {
     if (0.0..=1.0).contains(&p) {
@@ -201,22 +203,30 @@ pub fn walk_2d<R: Rng + ?Sized>(rng: &mut R, walk: &Walk2d) -> Result<WalkReport
 }
 
 /// Settings of the robot-level [`RandomWalk`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct RandomWalkConfig {
     /// Distance to each waypoint (m), in all 8 directions: in metres the algorithms §3.3 diagonal
     /// stride needs no rounding (r/√2 per axis).
+    #[setting(above = 0.0)]
     pub stride: f64,
     /// A waypoint closer than this counts as reached (m).
+    #[setting(above = 0.0)]
     pub reach_tolerance: f64,
     /// Give up on a waypoint after this long (s) and draw the next.
+    #[setting(above = 0.0)]
     pub timeout: f64,
     /// Cruise speed as a fraction of the speed limit.
+    #[setting(above = 0.0, max = 1.0)]
     pub cruise_fraction: f64,
     /// Proportional heading gain k: ω = k·(heading error) (1/s).
+    #[setting(above = 0.0)]
     pub k_heading: f64,
     /// Turn in place while the heading error exceeds this (rad)...
+    #[setting(min = 0.0)]
     pub turn_enter: f64,
     /// ...until it falls below this (rad); then drive.
+    #[setting(min = 0.0)]
     pub turn_exit: f64,
     /// Algorithms §3.1's adaptive walk: with a grid, draw only directions whose segment (extended by
     /// the robot radius) is free or unexplored, never occupied.
@@ -225,8 +235,10 @@ pub struct RandomWalkConfig {
     pub scan_aware: bool,
     /// Skip directions within this angle (rad) of an obstacle the reactive layer reported
     /// ([`Planner::obstacle_hint`])...
+    #[setting(min = 0.0)]
     pub hint_half_angle: f64,
     /// ...while the robot is within this distance (m) of where it was met...
+    #[setting(min = 0.0)]
     pub hint_radius: f64,
     /// ...for this many draws.
     pub hint_draws: u32,
@@ -432,9 +444,26 @@ impl RandomWalk {
     }
 }
 
+impl crate::Registered for RandomWalk {
+    fn build(
+        settings: &crate::Settings,
+        limits: RobotLimits,
+        _goal: Option<[f64; 2]>,
+        _local: Option<Box<dyn Planner>>,
+        seed: u64,
+    ) -> Result<Self, PlanningError> {
+        Ok(RandomWalk::new(limits, settings.random_walk, seed))
+    }
+}
+
 impl Planner for RandomWalk {
     fn kind(&self) -> PlannerKind {
         PlannerKind::RandomWalk
+    }
+
+    fn set_settings(&mut self, settings: &crate::Settings) -> Result<(), String> {
+        self.config = settings.random_walk;
+        Ok(())
     }
 
     fn step(&mut self, input: &PlannerInput) -> Command {

@@ -7,8 +7,8 @@
 
 use mole_mapping::FrontierGrid;
 use mole_planning::{
-    Command, Dwa, DwaConfig, Limited, LocalPlanner, Planner, PlannerConfig, PlannerInput,
-    RobotLimits, build_planner,
+    Command, Dwa, DwaConfig, Limited, Planner, PlannerConfig, PlannerInput, RobotLimits,
+    build_planner,
 };
 use mole_sensing::RayCaster;
 use mole_types::{Grid, MODE_DONE, MODE_ESCAPE, MODE_STALLED, PlannerKind, Scan, Square, Tactile};
@@ -157,7 +157,7 @@ fn run(sc: &Scenario, planner: &mut dyn Planner, max_steps: usize, stop_at_goal:
 fn build(sc: &Scenario, kind: PlannerKind, goal: bool) -> Box<dyn Planner> {
     let mut cfg = PlannerConfig::new(kind);
     cfg.seed = 7;
-    cfg.local = LocalPlanner::Dwa;
+    cfg.local = PlannerKind::Dwa;
     if goal {
         cfg.goal = sc.goal.map(|g| (g.x, g.y));
     }

@@ -1,8 +1,6 @@
 //! Every planner's step allocates nothing in steady state (a counting global allocator).
 
-use mole_planning::{
-    Command, LocalPlanner, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner,
-};
+use mole_planning::{Command, Planner, PlannerConfig, PlannerInput, RobotLimits, build_planner};
 use mole_runtime::{CountingAllocator, allocations_during};
 use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid, PlannerKind, Pose2, Scan};
 
@@ -60,22 +58,22 @@ fn every_planner_step_allocates_nothing_in_steady_state() {
     assert!(boxed >= 1, "a Box was allocated, the counter saw {boxed}");
     let (grid, scan) = world();
     for (kind, local, replan) in [
-        (PlannerKind::RandomWalk, LocalPlanner::Dwa, false),
-        (PlannerKind::Apf, LocalPlanner::Dwa, false),
-        (PlannerKind::Dwa, LocalPlanner::Dwa, false),
-        (PlannerKind::Frontier, LocalPlanner::Dwa, false),
-        (PlannerKind::Frontier, LocalPlanner::Apf, false),
+        (PlannerKind::RandomWalk, PlannerKind::Dwa, false),
+        (PlannerKind::Apf, PlannerKind::Dwa, false),
+        (PlannerKind::Dwa, PlannerKind::Dwa, false),
+        (PlannerKind::Frontier, PlannerKind::Dwa, false),
+        (PlannerKind::Frontier, PlannerKind::Apf, false),
         // `dwa` re-planning with APF after a bounce (`local` names the re-planner here).
-        (PlannerKind::Dwa, LocalPlanner::Apf, true),
+        (PlannerKind::Dwa, PlannerKind::Apf, true),
     ] {
         let mut cfg = PlannerConfig::new(kind);
         if replan {
-            cfg.replan_with = Some(local);
-            cfg.replan_time = 1.0;
+            cfg.settings.replan_with = Some(local);
+            cfg.settings.replan_time = 1.0;
         }
         cfg.goal = Some((8.0, 8.0));
         cfg.local = local;
-        cfg.frontier.reselect_every = 5; // select often, so selection runs inside the window
+        cfg.settings.frontier.reselect_every = 5; // select often, so selection runs inside the window
         let mut p = build_planner(&cfg, limits()).unwrap_or_else(|e| panic!("{e}"));
         let mut pose = Pose2::new(2.0, 2.0, 0.3);
         let mut status: Box<mole_types::PlanStatus> = bytemuck::zeroed_box();

@@ -1,6 +1,7 @@
 //! What happened to the stack's processes, as the recorder writes it on [`EVENTS_TOPIC`]: a role
 //! started, restarted after a crash, swapped for another process, exited or failed, a fault was
-//! injected (`mole fault`, from `stack/faults`), and samples the recorder lost.
+//! injected (`mole fault`, from `stack/faults`), a setting changed or refused while running
+//! (`mole param set`, from `stack/params`), and samples the recorder lost.
 //!
 //! The process events come from `stack/processes`, which the launcher publishes once a second
 //! with every role's pid, state and restart count (for `mole top`): a new pid with one restart
@@ -9,7 +10,8 @@
 //! same events as `mole up --record`, and an event is placed within a second of when it happened.
 
 use mole_types::{
-    Fault, FaultKind, PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, Processes, read_name,
+    Fault, FaultKind, PARAM_APPLIED, PARAM_REFUSED, PROCESS_EXITED, PROCESS_FAILED,
+    PROCESS_RESTARTING, ParamChange, Processes, read_name,
 };
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -20,7 +22,7 @@ pub const EVENTS_TOPIC: &str = "stack/events";
 /// The events' schema name.
 pub const EVENT_SCHEMA_NAME: &str = "mole.Event";
 /// The events' JSON schema.
-pub const EVENT_SCHEMA: &str = r#"{"type":"object","properties":{"tick":{"type":"integer","description":"the newest world tick when the recorder saw it"},"kind":{"type":"string","enum":["started","restarted","swapped","down","exited","failed","lost","fault"]},"role":{"type":"string"},"fault":{"type":"string","enum":["kill","stop","delay","drop","corrupt"],"description":"what `mole fault` did"},"id":{"type":"integer","description":"the fault's number in the run"},"target":{"type":"string","description":"the role or topic faulted"},"duration_s":{"type":"number"},"delay_ms":{"type":"number"},"fraction":{"type":"number"},"pid":{"type":"integer"},"old_pid":{"type":"integer"},"restarts":{"type":"integer"},"topic":{"type":"string"},"count":{"type":"integer","description":"samples lost before the recorder read them"}},"required":["tick","kind"]}"#;
+pub const EVENT_SCHEMA: &str = r#"{"type":"object","properties":{"tick":{"type":"integer","description":"the newest world tick when the recorder saw it"},"kind":{"type":"string","enum":["started","restarted","swapped","down","exited","failed","lost","fault","param"]},"role":{"type":"string"},"fault":{"type":"string","enum":["kill","stop","delay","drop","corrupt"],"description":"what `mole fault` did"},"id":{"type":"integer","description":"the fault's number in the run"},"target":{"type":"string","description":"the role or topic faulted"},"duration_s":{"type":"number"},"delay_ms":{"type":"number"},"fraction":{"type":"number"},"pid":{"type":"integer"},"old_pid":{"type":"integer"},"restarts":{"type":"integer"},"topic":{"type":"string"},"count":{"type":"integer","description":"samples lost before the recorder read them"},"key":{"type":"string","description":"the setting below its role (`mole param set`)"},"value":{"type":"string"},"applied":{"type":"boolean","description":"whether the process took it, before step `at`"},"at":{"type":"integer"},"why":{"type":"string","description":"why it was refused"}},"required":["tick","kind"]}"#;
 
 /// One event.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,6 +60,14 @@ pub enum Event {
         duration_s: f64,
         delay_ms: f64,
         fraction: f64,
+    },
+    /// A setting a process took before step `at` (`mole param set`), or refused and why.
+    Param {
+        role: String,
+        key: String,
+        value: String,
+        at: u64,
+        refused: Option<String>,
     },
 }
 
@@ -98,6 +108,15 @@ impl Event {
             } => json!({"tick": tick, "kind": "fault", "fault": fault, "id": id,
                         "target": target, "duration_s": duration_s, "delay_ms": delay_ms,
                         "fraction": fraction}),
+            Event::Param {
+                role,
+                key,
+                value,
+                at,
+                refused,
+            } => json!({"tick": tick, "kind": "param", "role": role, "key": key,
+                        "value": value, "applied": refused.is_none(), "at": at,
+                        "why": refused}),
         };
         value.to_string()
     }
@@ -114,6 +133,24 @@ impl Event {
             delay_ms: fault.delay_ns as f64 / 1e6,
             fraction: fault.fraction,
         }
+    }
+}
+
+impl Event {
+    /// The event of a process's answer on `stack/params` (`None` for a request).
+    pub fn of_param(change: &ParamChange) -> Option<Event> {
+        let refused = match change.state {
+            PARAM_APPLIED => None,
+            PARAM_REFUSED => Some(read_name(&change.text).into_owned()),
+            _ => return None,
+        };
+        Some(Event::Param {
+            role: read_name(&change.role).into_owned(),
+            key: read_name(&change.key).into_owned(),
+            value: read_name(&change.value).into_owned(),
+            at: change.apply_at,
+            refused,
+        })
     }
 }
 

@@ -77,6 +77,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             .clone()
             .unwrap_or_else(|| source_revision(&cwd)),
         every: every.describe(),
+        settings: args.common.settings.as_deref().unwrap_or_default(),
     };
     let run_facts = run_metadata(&facts).map_err(BadInput)?;
 

@@ -17,6 +17,9 @@ pub struct RunFacts<'a> {
     pub revision: String,
     /// The decimation settings (`crate::Every::describe`).
     pub every: String,
+    /// Every role's settings in force at the start, as JSON (`MOLE_SETTINGS`, docs/settings.md);
+    /// empty where the recorder was not told.
+    pub settings: &'a str,
 }
 
 /// The metadata: every fact as text; the launch file and the scenario by path and by content
@@ -29,6 +32,14 @@ pub fn run_metadata(facts: &RunFacts) -> Result<BTreeMap<String, String>, String
     m.insert("rate_hz".into(), facts.rate_hz.to_string());
     m.insert("revision".into(), facts.revision.clone());
     m.insert("every".into(), facts.every.clone());
+    m.insert(
+        "settings".into(),
+        if facts.settings.is_empty() {
+            "unknown".to_owned()
+        } else {
+            facts.settings.to_owned()
+        },
+    );
     m.insert(
         "recorder".into(),
         format!("mole-recorder {}", env!("CARGO_PKG_VERSION")),

@@ -9,7 +9,7 @@
 use mole_recorder::{Event, Every, Gaps, ProcessWatch, Record, every::due};
 use mole_runtime::{ClockMode, Context, RuntimeError, Subscriber, Waker};
 use mole_types::topics::{self, TopicVisitor};
-use mole_types::{Fault, Message, Processes, Topic, Truth, WorldMap};
+use mole_types::{Fault, Message, ParamChange, Processes, Topic, Truth, WorldMap};
 use std::any::Any;
 use std::collections::BTreeMap;
 
@@ -53,6 +53,8 @@ impl Seen {
             }
         } else if let Some(fault) = any.downcast_ref::<Fault>() {
             self.event(&Event::of_fault(fault));
+        } else if let Some(event) = any.downcast_ref::<ParamChange>().and_then(Event::of_param) {
+            self.event(&event);
         }
     }
 

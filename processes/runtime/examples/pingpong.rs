@@ -18,6 +18,7 @@ fn main() {
         seed: None,
         takeover: false,
         resume: None,
+        settings: None,
     };
     let a2 = args.clone();
     let echo = std::thread::spawn(move || {

@@ -19,6 +19,7 @@ fn main() {
         seed: None,
         takeover: false,
         resume: None,
+        settings: None,
     };
     let ctx =
         Context::with_shutdown_flag("statsdump", &args, Arc::new(AtomicBool::new(false))).unwrap();

@@ -3,13 +3,14 @@
 use crate::admin::create_node;
 use crate::clock::ClockMode;
 use crate::doorbell::{Doorbell, LISTENER_NAME};
-use crate::error::RuntimeError;
+use crate::error::{BadInput, RuntimeError};
 use crate::faults::FaultBoard;
 use crate::ports::{Publisher, Subscriber};
 use crate::stats::StatsRegistry;
 use crate::time::init_tracing;
 use crate::waitset::{WaitSet, Wake};
 use iceoryx2::prelude::*;
+use mole_types::Role;
 use mole_types::{Message, Stats, Topic, env, topics};
 use std::rc::Rc;
 use std::sync::Arc;
@@ -48,6 +49,10 @@ pub struct CommonArgs {
     /// after a crash (set by the launcher on a restart).
     #[arg(long, env = env::RESUME)]
     pub resume: Option<std::path::PathBuf>,
+    /// The role's settings as JSON (docs/settings.md): its `[ROLE.…]` tables of the launch
+    /// file and `mole up --set`, as the launcher checked them; unset, the defaults.
+    #[arg(long, env = env::SETTINGS)]
+    pub settings: Option<String>,
 }
 
 impl CommonArgs {
@@ -61,7 +66,30 @@ impl CommonArgs {
             seed: None,
             takeover: false,
             resume: None,
+            settings: None,
         }
+    }
+
+    /// The settings of `role` (its table of `--settings`), `S::default()` where they are left
+    /// out; JSON that does not parse, or a value out of its bounds, is bad input (exit 2)
+    /// naming the key.
+    pub fn settings<S: mole_types::settings::Settings>(&self, role: Role) -> Result<S, BadInput> {
+        let Some(text) = self.settings.as_deref().filter(|t| !t.trim().is_empty()) else {
+            return Ok(S::default());
+        };
+        let bad = |e: &dyn std::fmt::Display| {
+            BadInput(format!(
+                "--settings ({}), table `{role}`: {e}",
+                env::SETTINGS
+            ))
+        };
+        let mut all: serde_json::Value = serde_json::from_str(text).map_err(|e| bad(&e))?;
+        let Some(mine) = all.get_mut(role.name()).map(serde_json::Value::take) else {
+            return Ok(S::default());
+        };
+        let settings: S = serde_json::from_value(mine).map_err(|e| bad(&e))?;
+        settings.check().map_err(|e| bad(&e.below(role.name())))?;
+        Ok(settings)
     }
 }
 

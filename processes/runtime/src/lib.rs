@@ -15,7 +15,8 @@
 //! - Dead nodes' stale resources are cleaned when a process starts.
 //! - Per-topic statistics (rate, dropped, invalid, latency from `origin_ns`) are published on
 //!   `stack/stats` once a second.
-//! - `stack/control` (request-response) carries `mole swap` / `mole stop` to the launcher.
+//! - `stack/control` (request-response) carries `mole swap` / `mole stop` / `mole param` to the
+//!   launcher; `stack/params` carries a setting changed while a process runs to it (`params.rs`).
 
 mod admin;
 mod alloc_counter;
@@ -27,6 +28,7 @@ mod error;
 mod faults;
 mod keep;
 mod observe;
+mod params;
 mod ports;
 mod probe;
 mod source;
@@ -44,6 +46,7 @@ pub use doorbell::Ringer;
 pub use error::{BadInput, RuntimeError, exit_code};
 pub use keep::{Keeper, SaveRequest, read_resume_file, resume_file};
 pub use observe::Observation;
+pub use params::{MAX_PENDING, ScheduledChange, Tuning};
 pub use ports::{Publisher, Subscriber, Waker};
 pub use probe::stack_clock_mode;
 pub use source::{ClockEvent, Flow, LOCKSTEP_RESEND, REPLY_TIMEOUT};

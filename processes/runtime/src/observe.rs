@@ -69,6 +69,7 @@ impl Process {
         init: impl FnOnce(&Start) -> Result<S, BoxError>,
         mut on_wake: impl FnMut(&mut S, &mut Observation) -> Result<crate::Flow, BoxError>,
     ) -> Result<(), BoxError> {
+        self.check_ports_against_the_graph(&[])?;
         let waitset = self.ctx.waitset()?;
         let mut wakers = std::mem::take(&mut self.wakers);
         wakers.push(self.map.waker());

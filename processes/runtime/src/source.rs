@@ -64,6 +64,8 @@ impl Process {
         reply: Trigger<M>,
         mut on: impl FnMut(ClockEvent<M>) -> Result<Flow, BoxError>,
     ) -> Result<(), BoxError> {
+        // The clock publishes the map it follows, and its operator reads the pace.
+        self.check_ports_against_the_graph(&[topics::OPERATOR_PACE.name])?;
         let waitset = self.ctx.waitset()?;
         let mut operator = Operator::open(&self.ctx, self.start_held)?;
         let mut wakers = std::mem::take(&mut self.wakers);

@@ -17,10 +17,12 @@
 
 use crate::clock::ClockMode;
 use crate::context::{CommonArgs, Context};
-use crate::error::RuntimeError;
+use crate::error::{BadInput, RuntimeError};
+use crate::params::Tuning;
 use crate::ports::{Publisher, Subscriber, Waker};
 use crate::waitset::Wake;
-use mole_types::{Message, Topic, WorldMap, topics};
+use mole_types::settings::Settings;
+use mole_types::{Message, Role, Topic, WorldMap, topics};
 use std::any::Any;
 use std::marker::PhantomData;
 use std::time::{Duration, Instant};
@@ -266,6 +268,9 @@ pub struct Process {
     pub(crate) resume_after: Option<u64>,
     /// Lockstep, the clock: hold after step 0 until an operator paces the run.
     pub(crate) start_held: bool,
+    /// The topics the main declared it reads and writes, checked against [`GRAPH`] at start.
+    declared_inputs: Vec<&'static str>,
+    declared_outputs: std::cell::RefCell<Vec<&'static str>>,
 }
 
 impl Process {
@@ -293,6 +298,8 @@ impl Process {
             after_loop: false,
             resume_after: None,
             start_held: false,
+            declared_inputs: vec![topics::WORLD_MAP.name],
+            declared_outputs: Default::default(),
         })
     }
 
@@ -452,7 +459,44 @@ impl Process {
 
     /// A publisher for one of the process's outputs.
     pub fn output<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
+        self.declared_outputs.borrow_mut().push(topic.name);
         self.ctx.publisher(topic)
+    }
+
+    /// A role's ports are the graph's: the topics its main declared it reads (`extra`: those
+    /// its loop opens itself) and writes must be its row of [`GRAPH`], or it fails at start,
+    /// naming the difference. A process in no role of the graph (an observer, a tool) passes.
+    pub(crate) fn check_ports_against_the_graph(
+        &self,
+        extra: &[&'static str],
+    ) -> Result<(), RuntimeError> {
+        let Ok(role) = self.ctx.role().parse::<Role>() else {
+            return Ok(());
+        };
+        let spec = role.spec();
+        let sorted = |topics: &[&'static str]| {
+            let mut v = topics.to_vec();
+            v.sort_unstable();
+            v.dedup();
+            v
+        };
+        let mut inputs = sorted(&[&self.declared_inputs[..], extra].concat());
+        // Every process follows the map; the one that writes it does not read it.
+        inputs.retain(|t| !spec.outputs.contains(t));
+        let outputs = sorted(&self.declared_outputs.borrow());
+        for (what, declared, graph) in [
+            ("reads", inputs, sorted(spec.inputs)),
+            ("writes", outputs, sorted(spec.outputs)),
+        ] {
+            if declared != graph {
+                return Err(RuntimeError::Setting(format!(
+                    "the {role} process {what} {declared:?}, but its row of the graph \
+                     (mole_types::GRAPH) says {graph:?}: declare the graph's ports, or change \
+                     the graph"
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// Until the map is in nothing can use the inputs; left unread, their queues would fill
@@ -479,6 +523,7 @@ impl Process {
         rule: Rule,
         wakes: bool,
     ) -> Result<usize, RuntimeError> {
+        self.declared_inputs.push(topic.name);
         let subscriber = if wakes {
             self.ctx.subscriber(topic)?
         } else {
@@ -498,13 +543,49 @@ impl Process {
     /// Runs until shutdown: `init` once the world's map is in, then `step` once per due step,
     /// every step in order. An error from either ends the process with it.
     pub fn run<S>(
+        self,
+        init: impl FnOnce(&Start) -> Result<S, BoxError>,
+        step: impl FnMut(&mut S, &Step) -> Result<(), BoxError>,
+    ) -> Result<(), BoxError> {
+        self.run_with(init, step, |_, _| Ok(()))
+    }
+
+    /// This role's settings (`MOLE_SETTINGS`, docs/settings.md), checked, with the ports that
+    /// change them while it runs: hand them to [`Process::run_tuned`].
+    pub fn tuning<T: Settings>(&self, args: &CommonArgs) -> Result<Tuning<T>, BadInput> {
+        let role: Role = self
+            .ctx
+            .role()
+            .parse()
+            .map_err(|e| BadInput(format!("settings: {e}")))?;
+        Tuning::new(&self.ctx, args, role)
+    }
+
+    /// [`Process::run`] for a process whose settings change while it runs (`mole param set`):
+    /// before each step, every change due is checked against the settings and handed to `tune`
+    /// with the new settings; what `tune` refuses (with the reason) changes nothing.
+    pub fn run_tuned<S, T: Settings>(
+        self,
+        mut tuning: Tuning<T>,
+        init: impl FnOnce(&Start) -> Result<S, BoxError>,
+        step: impl FnMut(&mut S, &Step) -> Result<(), BoxError>,
+        mut tune: impl FnMut(&mut S, &T) -> Result<(), String>,
+    ) -> Result<(), BoxError> {
+        self.run_with(init, step, move |k, state| {
+            Ok(tuning.before_step(k, state, &mut tune)?)
+        })
+    }
+
+    fn run_with<S>(
         mut self,
         init: impl FnOnce(&Start) -> Result<S, BoxError>,
         mut step: impl FnMut(&mut S, &Step) -> Result<(), BoxError>,
+        mut before_step: impl FnMut(u64, &mut S) -> Result<(), BoxError>,
     ) -> Result<(), BoxError> {
         let Some((trigger, order)) = self.trigger else {
             return Err(RuntimeError::Setting("a process needs a trigger input".into()).into());
         };
+        self.check_ports_against_the_graph(&[])?;
         let waitset = self.ctx.waitset()?;
         let mut wakers = std::mem::take(&mut self.wakers);
         wakers.push(self.map.waker());
@@ -559,6 +640,7 @@ impl Process {
                         k - 1
                     );
                 }
+                before_step(k, state)?;
                 let origin_ns = self.ports[trigger].origin_ns();
                 step(
                     state,

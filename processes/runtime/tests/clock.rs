@@ -15,6 +15,7 @@ fn args(test: &str) -> CommonArgs {
         seed: None,
         takeover: false,
         resume: None,
+        settings: None,
     }
 }
 
@@ -31,7 +32,7 @@ fn a_late_process_gets_the_map_and_the_step_before_the_clock_publishes_it_again(
     let clock = {
         let (args, shutdown) = (args.clone(), shutdown.clone());
         std::thread::spawn(move || {
-            let mut p = Process::with_shutdown_flag("world", &args, shutdown).unwrap();
+            let mut p = Process::with_shutdown_flag("clock", &args, shutdown).unwrap();
             let cmd = p.trigger(topics::PLANNING_CMD, Order::Newest).unwrap();
             let mut map = p.output(topics::WORLD_MAP).unwrap();
             let mut truth = p.output(topics::WORLD_TRUTH).unwrap();

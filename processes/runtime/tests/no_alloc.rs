@@ -90,6 +90,7 @@ fn publish_wait_receive_allocates_nothing_per_step() {
             seed: None,
             takeover: false,
             resume: None,
+            settings: None,
         };
         // Planner and world close the loop: command out, odometry back.
         let mut planner = context("planner", &args);

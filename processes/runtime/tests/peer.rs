@@ -27,6 +27,7 @@ fn args(test: &str, robot: &str) -> CommonArgs {
         seed: None,
         takeover: false,
         resume: None,
+        settings: None,
     }
 }
 
@@ -45,7 +46,7 @@ fn start_robot_b(
     let (tx, rx) = mpsc::channel();
     let (ready_tx, ready_rx) = mpsc::channel();
     let handle = std::thread::spawn(move || {
-        let mut p = Process::with_shutdown_flag("localization", &b, shutdown).unwrap();
+        let mut p = Process::with_shutdown_flag("fuser", &b, shutdown).unwrap();
         let odom = p.trigger(topics::SENSING_ODOM, Order::Newest).unwrap();
         let peer = p.peer_input(&a_namespace, OFFER).unwrap();
         ready_tx.send(()).unwrap();
@@ -172,8 +173,7 @@ fn a_peer_cannot_read_an_ordinary_lockstep_topic_nor_its_own_namespace() {
     let (a, b) = (args("refused", "a"), args("refused", "b"));
     let robot_a = context(&a, "localization");
     let _ordinary = robot_a.publisher(topics::SENSING_ODOM).unwrap();
-    let mut p =
-        Process::with_shutdown_flag("localization", &b, Arc::new(AtomicBool::new(false))).unwrap();
+    let mut p = Process::with_shutdown_flag("fuser", &b, Arc::new(AtomicBool::new(false))).unwrap();
     let refused = |result: Result<_, RuntimeError>| result.err().map(|e| e.to_string());
     let ordinary = refused(p.peer_input(&a.namespace, topics::SENSING_ODOM));
     assert!(

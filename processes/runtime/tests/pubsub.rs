@@ -16,6 +16,7 @@ fn args(test: &str, mode: ClockMode) -> CommonArgs {
         seed: None,
         takeover: false,
         resume: None,
+        settings: None,
     }
 }
 

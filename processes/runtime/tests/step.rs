@@ -21,6 +21,7 @@ fn args(test: &str, mode: ClockMode) -> CommonArgs {
         seed: None,
         takeover: false,
         resume: None,
+        settings: None,
     }
 }
 
@@ -204,4 +205,39 @@ fn every_tick_in_order_handles_each_queued_step_and_joins_a_run_under_way() {
     );
     shutdown.store(true, Ordering::SeqCst);
     handle.join().unwrap();
+}
+
+/// A role's main that declares other ports than the graph's row fails at start, naming what it
+/// declared and what the graph says; the graph's own ports start.
+#[test]
+fn a_role_whose_ports_differ_from_the_graph_fails_at_start() {
+    let args = args("graph", ClockMode::Lockstep);
+    // Shut down from the start: a process that passes the check returns at its first wait.
+    let shutdown = Arc::new(AtomicBool::new(true));
+    // Mapping's ports with `tactile` read or not, and the contact grid written or not.
+    let run = |tactile: bool, contact: bool| {
+        let mut p = Process::with_shutdown_flag("mapping", &args, shutdown.clone()).unwrap();
+        let _pose = p
+            .trigger(topics::LOCALIZATION_POSE, Order::EveryTick)
+            .unwrap();
+        let _scan: In<Scan> = p.input(topics::SENSING_SCAN, Rule::SameTick).unwrap();
+        let _touch: Option<In<mole_types::Tactile>> =
+            tactile.then(|| p.input(topics::SENSING_TACTILE, Rule::SameTick).unwrap());
+        let _grid = p.output(topics::MAPPING_GRID).unwrap();
+        let _contact = contact.then(|| p.output(topics::MAPPING_CONTACT).unwrap());
+        p.run(|_| Ok(()), |_: &mut (), _| Ok(()))
+            .map_err(|e| e.to_string())
+    };
+    let err = run(false, true).expect_err("an input short");
+    assert!(err.contains("the mapping process reads"), "{err}");
+    assert!(
+        err.contains("\"sensing/tactile\"") && err.contains("GRAPH"),
+        "{err}"
+    );
+    let err = run(true, false).expect_err("an output short");
+    assert!(
+        err.contains("the mapping process writes [\"mapping/grid\"]"),
+        "{err}"
+    );
+    run(true, true).expect("the graph's ports start (and stop at once)");
 }

@@ -14,8 +14,8 @@ use crate::input::{MAX_SPEED, MIN_SPEED, TimelineOp};
 use crate::scene::{Frame, LATENCY_WINDOW_S, Scene, TRUTHS_KEPT};
 use mole_recorder::tape::{Sample, TapeError, Window, for_each_sample, read_tape};
 use mole_types::{
-    ClockMode, Fault, Grid, Landmarks, Message, Particles, PlanStatus, Pose, Processes, Scan,
-    Stats, Truth, WorldMap, topics,
+    ClockMode, Fault, Grid, Landmarks, Message, ParamChange, Particles, PlanStatus, Pose,
+    Processes, Scan, Stats, Truth, WorldMap, topics,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -204,7 +204,7 @@ pub enum ReelError {
 }
 
 /// Every topic the view shows, as recorded.
-pub const SHOWN: [&str; 12] = [
+pub const SHOWN: [&str; 13] = [
     topics::WORLD_MAP.name,
     topics::WORLD_TRUTH.name,
     topics::LOCALIZATION_POSE.name,
@@ -217,6 +217,7 @@ pub const SHOWN: [&str; 12] = [
     topics::STACK_STATS.name,
     topics::STACK_PROCESSES.name,
     topics::STACK_FAULTS.name,
+    topics::STACK_PARAMS.name,
 ];
 
 /// A recording's shown topics in memory, each indexed by the world tick it was recorded at
@@ -239,6 +240,7 @@ pub struct Reel {
     stats: Track,
     processes: Track,
     faults: Track,
+    params: Track,
 }
 
 impl Reel {
@@ -303,6 +305,7 @@ impl Reel {
             stats: Track::default(),
             processes: Track::default(),
             faults: Track::default(),
+            params: Track::default(),
         }
     }
 
@@ -334,6 +337,7 @@ impl Reel {
                 (&mut self.processes, |d| valid::<Processes>(d))
             }
             t if t == topics::STACK_FAULTS.name => (&mut self.faults, |d| valid::<Fault>(d)),
+            t if t == topics::STACK_PARAMS.name => (&mut self.params, |d| valid::<ParamChange>(d)),
             _ => return Ok(()),
         };
         check(data)?;
@@ -426,6 +430,9 @@ impl Reel {
                 }
                 (None, None) => break,
             }
+        }
+        for (tick, change) in self.params.within(from, to) {
+            scene.on_param_at(&decoded(change), tick);
         }
     }
 }
@@ -558,6 +565,13 @@ mod tests {
         kill.to_message(&mut fault, 1, 0, 0);
         reel.add(&sample(topics::STACK_FAULTS.name, 350, &*fault))
             .expect("a fault");
+        let mut change: Box<ParamChange> = zeroed();
+        (change.state, change.apply_at) = (mole_types::PARAM_APPLIED, 479);
+        write_name(&mut change.role, "planning");
+        write_name(&mut change.key, "dwa.critics.heading");
+        write_name(&mut change.value, "0.4");
+        reel.add(&sample(topics::STACK_PARAMS.name, 480, &*change))
+            .expect("a setting changed");
         reel
     }
 
@@ -675,16 +689,25 @@ mod tests {
         assert_eq!(s.latency.map(|l| l.samples), Some(201), "the 2 s window");
         let events: Vec<(&Value, &Value)> =
             s.events.iter().map(|e| (&e["kind"], &e["tick"])).collect();
-        assert_eq!(s.events_total, 3);
+        assert_eq!(s.events_total, 4);
         assert_eq!(
             events,
             [
                 (&"started".into(), &250.into()),
                 (&"fault".into(), &350.into()),
-                (&"restarted".into(), &450.into())
+                (&"restarted".into(), &450.into()),
+                (&"param".into(), &480.into())
             ]
         );
         assert_eq!(s.events[1]["target"], "planning");
+        assert_eq!(
+            (
+                &s.events[3]["key"],
+                &s.events[3]["applied"],
+                &s.events[3]["at"]
+            ),
+            (&"dwa.critics.heading".into(), &true.into(), &479.into())
+        );
         assert_eq!(
             s.timeline.map(|t| (t.first_tick, t.tick, t.last_tick)),
             Some((0, 500, 600))

@@ -6,8 +6,8 @@ use mole_recorder::{Event, ProcessWatch};
 use mole_types::{
     DIRECTION_PUBLISH, Fault, GRID_CONTACT, GRID_FRONTIER, Grid, LANDMARK_ANONYMOUS, Landmarks,
     MODE_ARRIVED, MODE_BOUNCE_BACK, MODE_DONE, MODE_ESCAPE, MODE_EXPLORE, MODE_GOAL, MODE_IDLE,
-    MODE_STALLED, Particles, PlanStatus, Pose, Processes, STATUS_HAS_FRONTIER, STATUS_HAS_GOAL,
-    Scan, Stats, TRUTH_IN_CONTACT, Truth, WorldMap, read_name,
+    MODE_STALLED, ParamChange, Particles, PlanStatus, Pose, Processes, STATUS_HAS_FRONTIER,
+    STATUS_HAS_GOAL, Scan, Stats, TRUTH_IN_CONTACT, Truth, WorldMap, read_name,
 };
 use serde::Serialize;
 use std::collections::{BTreeMap, VecDeque};
@@ -501,6 +501,19 @@ impl Scene {
     /// stack/faults read at world tick `tick` (a recording's).
     pub fn on_fault_at(&mut self, fault: &Fault, tick: u64) {
         self.event(&Event::of_fault(fault), tick);
+    }
+
+    /// stack/params: a setting a process took or refused (`mole param set`), at the newest
+    /// world tick (a request is no event).
+    pub fn on_param(&mut self, change: &ParamChange) {
+        self.on_param_at(change, self.tick());
+    }
+
+    /// stack/params read at world tick `tick` (a recording's).
+    pub fn on_param_at(&mut self, change: &ParamChange, tick: u64) {
+        if let Some(event) = Event::of_param(change) {
+            self.event(&event, tick);
+        }
     }
 
     fn event(&mut self, event: &Event, tick: u64) {

@@ -9,8 +9,8 @@
 
 use mole_runtime::{ClockMode, Context, RuntimeError, Subscriber, Waker};
 use mole_types::{
-    Fault, Grid, Landmarks, Message, Particles, PlanStatus, Pose, Processes, Scan, Stats, Truth,
-    WorldMap, topics,
+    Fault, Grid, Landmarks, Message, ParamChange, Particles, PlanStatus, Pose, Processes, Scan,
+    Stats, Truth, WorldMap, topics,
 };
 use mole_view::Scene;
 
@@ -28,6 +28,7 @@ pub struct Taps {
     stats: Subscriber<Stats>,
     processes: Subscriber<Processes>,
     faults: Subscriber<Fault>,
+    params: Subscriber<ParamChange>,
 }
 
 /// Drains `subscriber`; the newest sample, if a new one came, goes to `on_newest`.
@@ -60,6 +61,7 @@ impl Taps {
             stats: ctx.passive_subscriber(topics::STACK_STATS)?,
             processes: ctx.passive_subscriber(topics::STACK_PROCESSES)?,
             faults: ctx.passive_subscriber(topics::STACK_FAULTS)?,
+            params: ctx.passive_subscriber(topics::STACK_PARAMS)?,
         })
     }
 
@@ -95,6 +97,7 @@ impl Taps {
         self.stats.drain(|s| scene.on_stats(s));
         self.processes.drain(|p| scene.on_processes(p));
         self.faults.drain(|f| scene.on_fault(f));
+        self.params.drain(|p| scene.on_param(p));
     }
 
     /// Reads every queue but the map's and forgets the samples.
@@ -110,5 +113,6 @@ impl Taps {
         self.stats.drain(|_| {});
         self.processes.drain(|_| {});
         self.faults.drain(|_| {});
+        self.params.drain(|_| {});
     }
 }

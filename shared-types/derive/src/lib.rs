@@ -169,3 +169,276 @@ fn known(attr: &str, key: &Path) -> bool {
         _ => false,
     }
 }
+
+/// A setting: a struct of settings (each field a setting) or a choice (an enum of unit variants,
+/// written as its serde name). Gives `mole_types::settings::Setting`: the check of every value
+/// (finite numbers, the bounds of `#[setting(min = …, above = …, max = …)]`) naming the key, and
+/// the keys with their doc comments, for docs/settings.md and `mole param list`.
+/// `#[setting(fixed = "why")]` marks a key that cannot change while the process runs.
+#[proc_macro_derive(Setting, attributes(setting))]
+pub fn derive_setting(input: TokenStream) -> TokenStream {
+    let input = parse_macro_input!(input as DeriveInput);
+    setting::expand(&input)
+        .unwrap_or_else(syn::Error::into_compile_error)
+        .into()
+}
+
+mod setting {
+    use proc_macro2::TokenStream as Tokens;
+    use quote::quote;
+    use syn::{Attribute, Data, DeriveInput, Expr, Fields, LitStr};
+
+    /// The doc comment of an item, its lines joined by spaces.
+    fn doc(attrs: &[Attribute]) -> String {
+        let mut lines = Vec::new();
+        for a in attrs.iter().filter(|a| a.path().is_ident("doc")) {
+            if let syn::Meta::NameValue(nv) = &a.meta
+                && let Expr::Lit(lit) = &nv.value
+                && let syn::Lit::Str(s) = &lit.lit
+            {
+                lines.push(s.value().trim().to_owned());
+            }
+        }
+        lines.join(" ")
+    }
+
+    /// `#[serde(rename = "…")]` of a field or variant, and `#[serde(rename_all = "…")]` of a
+    /// container.
+    fn serde_value(attrs: &[Attribute], key: &str) -> syn::Result<Option<String>> {
+        let mut found = None;
+        for a in attrs.iter().filter(|a| a.path().is_ident("serde")) {
+            a.parse_nested_meta(|meta| {
+                if meta.path.is_ident(key) {
+                    found = Some(meta.value()?.parse::<LitStr>()?.value());
+                } else if meta.input.peek(syn::Token![=]) {
+                    meta.value()?.parse::<Expr>()?;
+                }
+                Ok(())
+            })?;
+        }
+        Ok(found)
+    }
+
+    /// Whether `#[serde(key)]` (a flag, such as `skip`) is on an item.
+    fn serde_flag(attrs: &[Attribute], key: &str) -> syn::Result<bool> {
+        let mut found = false;
+        for a in attrs.iter().filter(|a| a.path().is_ident("serde")) {
+            a.parse_nested_meta(|meta| {
+                if meta.path.is_ident(key) {
+                    found = true;
+                }
+                if meta.input.peek(syn::Token![=]) {
+                    meta.value()?.parse::<Expr>()?;
+                }
+                Ok(())
+            })?;
+        }
+        Ok(found)
+    }
+
+    /// A field's bounds and whether it is fixed while running.
+    #[derive(Default)]
+    struct Rules {
+        min: Option<Expr>,
+        above: Option<Expr>,
+        max: Option<Expr>,
+        fixed: Option<String>,
+    }
+
+    fn rules(attrs: &[Attribute]) -> syn::Result<Rules> {
+        let mut r = Rules::default();
+        for a in attrs.iter().filter(|a| a.path().is_ident("setting")) {
+            a.parse_nested_meta(|meta| {
+                let value = meta.value()?;
+                if meta.path.is_ident("min") {
+                    r.min = Some(value.parse()?);
+                } else if meta.path.is_ident("above") {
+                    r.above = Some(value.parse()?);
+                } else if meta.path.is_ident("max") {
+                    r.max = Some(value.parse()?);
+                } else if meta.path.is_ident("fixed") {
+                    r.fixed = Some(value.parse::<LitStr>()?.value());
+                } else {
+                    return Err(meta.error(
+                        "mole: #[setting(…)] takes min, above, max (bounds) and fixed (why)",
+                    ));
+                }
+                Ok(())
+            })?;
+        }
+        Ok(r)
+    }
+
+    fn kebab(name: &str) -> String {
+        let mut out = String::new();
+        for (i, c) in name.chars().enumerate() {
+            if c.is_uppercase() {
+                if i > 0 {
+                    out.push('-');
+                }
+                out.extend(c.to_lowercase());
+            } else {
+                out.push(c);
+            }
+        }
+        out
+    }
+
+    pub fn expand(input: &DeriveInput) -> syn::Result<Tokens> {
+        let name = &input.ident;
+        let s = quote! { ::mole_types::settings };
+        match &input.data {
+            Data::Struct(data) => {
+                let Fields::Named(fields) = &data.fields else {
+                    return Err(syn::Error::new_spanned(
+                        name,
+                        "mole: settings have named fields",
+                    ));
+                };
+                let mut checks = Vec::new();
+                let mut keys = Vec::new();
+                for f in &fields.named {
+                    if serde_flag(&f.attrs, "skip")? {
+                        continue;
+                    }
+                    let ident = f.ident.as_ref().expect("named");
+                    let ty = &f.ty;
+                    let key = serde_value(&f.attrs, "rename")?.unwrap_or_else(|| ident.to_string());
+                    let text = doc(&f.attrs);
+                    let r = rules(&f.attrs)?;
+                    let mut rule_text = Vec::new();
+                    let mut bounds = Vec::new();
+                    if let Some(min) = &r.min {
+                        rule_text.push(format!("≥ {}", quote!(#min)));
+                        let expected = format!("a value ≥ {}", quote!(#min));
+                        bounds.push(quote! {
+                            if !#s::Bound::is_at_least(&self.#ident, #min) {
+                                return Err(#s::SettingError::new(&path, #expected, &self.#ident));
+                            }
+                        });
+                    }
+                    if let Some(above) = &r.above {
+                        rule_text.push(format!("> {}", quote!(#above)));
+                        let expected = format!("a value > {}", quote!(#above));
+                        bounds.push(quote! {
+                            if !#s::Bound::is_above(&self.#ident, #above) {
+                                return Err(#s::SettingError::new(&path, #expected, &self.#ident));
+                            }
+                        });
+                    }
+                    if let Some(max) = &r.max {
+                        rule_text.push(format!("≤ {}", quote!(#max)));
+                        let expected = format!("a value ≤ {}", quote!(#max));
+                        bounds.push(quote! {
+                            if !#s::Bound::is_at_most(&self.#ident, #max) {
+                                return Err(#s::SettingError::new(&path, #expected, &self.#ident));
+                            }
+                        });
+                    }
+                    let rule_text = rule_text.join(", ");
+                    let fixed = match &r.fixed {
+                        Some(why) => quote! { Some(#why) },
+                        None => quote! { None },
+                    };
+                    checks.push(quote! {
+                        {
+                            let path = #s::join(at, #key);
+                            <#ty as #s::Setting>::check_at(&self.#ident, &path)?;
+                            #(#bounds)*
+                        }
+                    });
+                    keys.push(quote! {
+                        <#ty as #s::Setting>::keys_at(
+                            &#s::join(at, #key),
+                            #s::About { doc: #text, rule: #rule_text, fixed: #fixed },
+                            out,
+                        );
+                    });
+                }
+                // `#[setting(check = path)]` on the struct: a check across its fields.
+                let mut whole = None;
+                for a in input.attrs.iter().filter(|a| a.path().is_ident("setting")) {
+                    a.parse_nested_meta(|meta| {
+                        if meta.path.is_ident("check") {
+                            whole = Some(meta.value()?.parse::<syn::Path>()?);
+                            Ok(())
+                        } else {
+                            Err(meta.error("mole: #[setting(…)] on a struct takes check = path"))
+                        }
+                    })?;
+                }
+                let whole = whole.map(|check| {
+                    quote! { #check(self).map_err(|e| e.below(at))?; }
+                });
+                Ok(quote! {
+                    impl #s::Setting for #name {
+                        fn kind() -> ::std::string::String {
+                            "table".to_owned()
+                        }
+                        fn check_at(&self, at: &str) -> ::core::result::Result<(), #s::SettingError> {
+                            #(#checks)*
+                            #whole
+                            Ok(())
+                        }
+                        /// A table marked fixed fixes each key in it (unless one says why itself).
+                        fn keys_at(at: &str, about: #s::About, out: &mut ::std::vec::Vec<#s::Key>) {
+                            let first = out.len();
+                            #(#keys)*
+                            if let Some(why) = about.fixed {
+                                for key in &mut out[first..] {
+                                    key.fixed.get_or_insert_with(|| why.to_owned());
+                                }
+                            }
+                        }
+                    }
+                })
+            }
+            Data::Enum(data) => {
+                let all = serde_value(&input.attrs, "rename_all")?;
+                let mut names = Vec::new();
+                for v in &data.variants {
+                    if !matches!(v.fields, Fields::Unit) {
+                        return Err(syn::Error::new_spanned(
+                            v,
+                            "mole: a choice has unit variants (write Setting by hand otherwise)",
+                        ));
+                    }
+                    let n = match serde_value(&v.attrs, "rename")? {
+                        Some(n) => n,
+                        None => match all.as_deref() {
+                            Some("kebab-case") => kebab(&v.ident.to_string()),
+                            Some("snake_case") => kebab(&v.ident.to_string()).replace('-', "_"),
+                            Some("lowercase") => v.ident.to_string().to_lowercase(),
+                            None => v.ident.to_string(),
+                            Some(other) => {
+                                return Err(syn::Error::new_spanned(
+                                    name,
+                                    format!("mole: rename_all = \"{other}\" is not supported"),
+                                ));
+                            }
+                        },
+                    };
+                    names.push(n);
+                }
+                let kind = format!("one of: {}", names.join(", "));
+                Ok(quote! {
+                    impl #s::Setting for #name {
+                        fn kind() -> ::std::string::String {
+                            #kind.to_owned()
+                        }
+                        fn check_at(&self, _at: &str) -> ::core::result::Result<(), #s::SettingError> {
+                            Ok(())
+                        }
+                        fn keys_at(at: &str, about: #s::About, out: &mut ::std::vec::Vec<#s::Key>) {
+                            out.push(#s::Key::leaf::<Self>(at, about));
+                        }
+                    }
+                })
+            }
+            Data::Union(_) => Err(syn::Error::new_spanned(
+                name,
+                "mole: a setting is a struct or an enum",
+            )),
+        }
+    }
+}

@@ -33,10 +33,12 @@ use crate::models::MIN_RANGE;
 use crate::models::{MAX_ODOM_DT, MAX_ODOM_SPEED, MAX_ODOM_TURN_RATE};
 use crate::noise::NoiseModel;
 use factors::{ObservationFactor, OdometryFactor, PositionFactor, observation_information};
+use mole_types::Setting;
 use mole_types::{BeaconReading, Odom, Pose2, WorldMap, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use normal_equations::{NormalEquations, SolveError};
 use problem::Problem;
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// Default σ of the prior on the first pose (m, m, rad): the start is known.
@@ -48,20 +50,27 @@ pub const DEFAULT_MAX_RANGE: f64 = 1000.0;
 const POSES_PER_RESERVED_FIX: usize = 100;
 
 /// Levenberg–Marquardt settings (Grisetti et al. 2010 §IV; Marquardt's diagonal scaling).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct SolverConfig {
     /// λ of the first iteration of every [`PoseGraph::optimize`] call.
+    #[setting(above = 0.0)]
     pub initial_lambda: f64,
     /// λ is divided by this after an accepted step and multiplied by it after a rejected one.
+    #[setting(above = 1.0)]
     pub lambda_factor: f64,
     /// λ never drops below this.
+    #[setting(above = 0.0)]
     pub min_lambda: f64,
     /// Past this λ the solve stops: no step along the gradient reduces the cost.
+    #[setting(above = 0.0)]
     pub max_lambda: f64,
     /// Converged when the largest component of a step (m or rad) is at most this.
+    #[setting(above = 0.0)]
     pub step_tolerance: f64,
     /// Converged when an accepted step lowers χ² by at most this fraction of it (1e-6 is far
     /// below χ²'s own statistical spread, √(2/dof) of it, for any graph worth solving).
+    #[setting(above = 0.0)]
     pub cost_tolerance: f64,
 }
 

@@ -134,7 +134,21 @@ impl GraphSlamEstimator {
     /// GraphSLAM for the world in `map`: the front-end as [`EkfSlamEstimator::from_map`], the
     /// graph anchored at the start pose, the smoother thread started.
     pub fn from_map(map: &WorldMap) -> Result<Self, LocalizationError> {
-        Self::with_front(EkfSlamEstimator::from_map(map), map, None)
+        Self::with_settings(map, &crate::Settings::default())
+    }
+
+    /// [`GraphSlamEstimator::from_map`] with the front-end's `settings.slam` and the solver's
+    /// `settings.graph_slam`.
+    pub fn with_settings(
+        map: &WorldMap,
+        settings: &crate::Settings,
+    ) -> Result<Self, LocalizationError> {
+        Self::with_front(
+            EkfSlamEstimator::with_settings(map, settings),
+            map,
+            settings,
+            None,
+        )
     }
 
     /// GraphSLAM going on from another estimator's output (see [`crate::resume`]): the front-end
@@ -146,9 +160,19 @@ impl GraphSlamEstimator {
         pose: &Pose,
         landmarks: Option<&Landmarks>,
     ) -> Result<Self, LocalizationError> {
-        let front = EkfSlamEstimator::resume(map, pose, landmarks);
+        Self::resume_with(map, &crate::Settings::default(), pose, landmarks)
+    }
+
+    /// [`GraphSlamEstimator::resume`] with these settings.
+    pub fn resume_with(
+        map: &WorldMap,
+        settings: &crate::Settings,
+        pose: &Pose,
+        landmarks: Option<&Landmarks>,
+    ) -> Result<Self, LocalizationError> {
+        let front = EkfSlamEstimator::resume_with(map, settings, pose, landmarks);
         let diagonal = [pose.covariance[0], pose.covariance[4], pose.covariance[8]];
-        Self::with_front(front, map, Some(diagonal))
+        Self::with_front(front, map, settings, Some(diagonal))
     }
 
     /// The estimator around `front`, its graph anchored at the front-end's pose with the
@@ -156,9 +180,11 @@ impl GraphSlamEstimator {
     fn with_front(
         front: EkfSlamEstimator,
         map: &WorldMap,
+        settings: &crate::Settings,
         variances: Option<[f64; 3]>,
     ) -> Result<Self, LocalizationError> {
         let mut config = GraphSlamConfig::from_map(map);
+        config.solver = settings.graph_slam;
         if let Some(variances) = variances {
             for (std, var) in config.prior_std.iter_mut().zip(variances) {
                 if var.is_finite() && var.sqrt() > *std {

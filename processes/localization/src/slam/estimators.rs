@@ -10,8 +10,9 @@
 
 use super::{
     Association, AssociationStats, EkfSlam, FastSlam, FastSlamConfig, FuseReport, Landmark,
-    SlamConfig, SlamError,
+    SlamError,
 };
+use crate::Settings;
 use crate::noise::NoiseModel;
 use crate::{Estimator, Readings};
 use mole_types::{
@@ -106,8 +107,14 @@ impl EkfSlamEstimator {
     /// EKF-SLAM for the world in `map`: at the start pose with Σ = 0 (the start pose defines
     /// the map frame), the sensors' noise, room for [`SLAM_CAPACITY`] landmarks, an empty map.
     pub fn from_map(map: &WorldMap) -> Self {
+        Self::with_settings(map, &Settings::default())
+    }
+
+    /// [`EkfSlamEstimator::from_map`] with `settings.slam`.
+    pub fn with_settings(map: &WorldMap, settings: &Settings) -> Self {
         Self::starting(
             map,
+            settings,
             Pose2::new(map.start_x, map.start_y, map.start_theta),
             Matrix3::zeros(),
         )
@@ -116,8 +123,18 @@ impl EkfSlamEstimator {
     /// EKF-SLAM going on from another estimator's output: N(pose, its covariance) and every
     /// usable landmark of `landmarks`, uncorrelated (see [`crate::resume`]).
     pub fn resume(map: &WorldMap, pose: &Pose, landmarks: Option<&Landmarks>) -> Self {
+        Self::resume_with(map, &Settings::default(), pose, landmarks)
+    }
+
+    /// [`EkfSlamEstimator::resume`] with `settings.slam`.
+    pub fn resume_with(
+        map: &WorldMap,
+        settings: &Settings,
+        pose: &Pose,
+        landmarks: Option<&Landmarks>,
+    ) -> Self {
         let (mean, sigma) = pose_of(pose);
-        let mut est = Self::starting(map, mean, sigma);
+        let mut est = Self::starting(map, settings, mean, sigma);
         for l in landmarks.into_iter().flat_map(landmarks_of) {
             if est.slam.insert_landmark(&l).is_err() {
                 est.ignored += 1;
@@ -126,10 +143,10 @@ impl EkfSlamEstimator {
         est
     }
 
-    fn starting(map: &WorldMap, pose: Pose2, sigma: Matrix3<f64>) -> Self {
+    fn starting(map: &WorldMap, settings: &Settings, pose: Pose2, sigma: Matrix3<f64>) -> Self {
         let noise = NoiseModel::from_map(map);
         Self {
-            slam: EkfSlam::new(pose, sigma, noise, SLAM_CAPACITY, SlamConfig::default()),
+            slam: EkfSlam::new(pose, sigma, noise, SLAM_CAPACITY, settings.slam),
             noise,
             decisions: Vec::with_capacity(MAX_BEACONS),
             ignored: 0,
@@ -159,6 +176,12 @@ impl EkfSlamEstimator {
 }
 
 impl Estimator for EkfSlamEstimator {
+    fn set_noise(&mut self, noise: &NoiseModel) -> Result<(), String> {
+        (self.noise, self.slam.motion.noise) = (*noise, *noise);
+        self.slam.q_t = noise.q_beacon();
+        Ok(())
+    }
+
     fn id(&self) -> u32 {
         EstimatorKind::EkfSlam.code()
     }
@@ -235,14 +258,33 @@ impl FastSlamEstimator {
     /// frame), the sensors' noise, the map's seed, the default [`FastSlamConfig`], room for
     /// [`SLAM_CAPACITY`] landmarks per particle, an empty map.
     pub fn from_map(map: &WorldMap) -> Self {
-        Self::starting(map, Pose2::new(map.start_x, map.start_y, map.start_theta))
+        Self::with_settings(map, &Settings::default())
+    }
+
+    /// [`FastSlamEstimator::from_map`] with `settings.slam` and `settings.fastslam`.
+    pub fn with_settings(map: &WorldMap, settings: &Settings) -> Self {
+        Self::starting(
+            map,
+            settings,
+            Pose2::new(map.start_x, map.start_y, map.start_theta),
+        )
     }
 
     /// FastSLAM going on from another estimator's output: particles drawn from N(pose, its
     /// covariance), each with every usable landmark of `landmarks` (see [`crate::resume`]).
     pub fn resume(map: &WorldMap, pose: &Pose, landmarks: Option<&Landmarks>) -> Self {
+        Self::resume_with(map, &Settings::default(), pose, landmarks)
+    }
+
+    /// [`FastSlamEstimator::resume`] with `settings.slam` and `settings.fastslam`.
+    pub fn resume_with(
+        map: &WorldMap,
+        settings: &Settings,
+        pose: &Pose,
+        landmarks: Option<&Landmarks>,
+    ) -> Self {
         let (mean, sigma) = pose_of(pose);
-        let mut est = Self::starting(map, mean);
+        let mut est = Self::starting(map, settings, mean);
         est.slam.scatter(&sigma);
         for l in landmarks.into_iter().flat_map(landmarks_of) {
             if est.slam.insert_landmark(&l).is_err() {
@@ -252,16 +294,16 @@ impl FastSlamEstimator {
         est
     }
 
-    fn starting(map: &WorldMap, pose: Pose2) -> Self {
+    fn starting(map: &WorldMap, settings: &Settings, pose: Pose2) -> Self {
         Self {
             slam: FastSlam::new(
                 pose,
                 NoiseModel::from_map(map),
                 SLAM_CAPACITY,
-                SlamConfig::default(),
+                settings.slam,
                 FastSlamConfig {
                     seed: map.seed,
-                    ..FastSlamConfig::default()
+                    ..settings.fastslam
                 },
             ),
             decisions: Vec::with_capacity(MAX_BEACONS),
@@ -287,6 +329,11 @@ impl FastSlamEstimator {
 }
 
 impl Estimator for FastSlamEstimator {
+    fn set_noise(&mut self, noise: &NoiseModel) -> Result<(), String> {
+        self.slam.noise = *noise;
+        Ok(())
+    }
+
     fn id(&self) -> u32 {
         EstimatorKind::FastSlam.code()
     }

@@ -21,11 +21,13 @@ use crate::kalman::kalman_correct;
 use crate::models::{add_slide, sliding_is_plausible, unicycle_g, wrap_near};
 use crate::noise::NoiseModel;
 use crate::pf::{low_variance_resample, normalise_log_weights};
+use mole_types::Setting;
 use mole_types::{BeaconReading, LANDMARK_ANONYMOUS, MAX_LANDMARKS, Pose2, wrap_angle};
 use nalgebra::{Cholesky, Matrix2, Matrix3, Vector2, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
 
 /// Mixed into the seed so FastSLAM's stream differs from the localiser PF's.
 const FASTSLAM_SEED_SALT: u64 = 0xFA57_51A3_0000_0013;
@@ -39,16 +41,22 @@ pub const DEFAULT_ISLANDS: usize = 32;
 pub const DEFAULT_PARTICLES: usize = 256;
 
 /// Tuning of a [`FastSlam`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct FastSlamConfig {
     /// M, the number of particles (≥ 1), rounded up to a multiple of `islands`.
+    #[setting(min = 1, fixed = "the particle sets are allocated at start")]
     pub n_particles: usize,
     /// K, the independent filters the particles are split into: each island weighs and
     /// resamples its own particles only, and the estimate is their equal mixture.
+    #[setting(min = 1, fixed = "the islands are allocated at start")]
     pub islands: usize,
     /// Resample when N_eff < `resample_threshold` · M.
+    #[setting(min = 0.0, max = 1.0)]
     pub resample_threshold: f64,
-    /// Seed of the ChaCha stream that draws the motion noise and the resampling offsets.
+    /// Seed of the ChaCha stream that draws the motion noise and the resampling offsets: the
+    /// run's, not a setting.
+    #[serde(skip)]
     pub seed: u64,
 }
 

@@ -40,12 +40,15 @@ pub use peer::{
 };
 
 use crate::kalman::KalmanError;
+use mole_types::Setting;
 use nalgebra::{Matrix2, Matrix2x3, Vector2, Vector3};
+use serde::{Deserialize, Serialize};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 use thiserror::Error;
 
 /// How readings are matched to landmarks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Setting)]
+#[serde(rename_all = "kebab-case")]
 pub enum Correspondence {
     /// The reading's id is the landmark's identity (Thrun §10.2, Table 10.1).
     Known,
@@ -55,21 +58,26 @@ pub enum Correspondence {
 }
 
 /// Tuning shared by [`EkfSlam`] and [`FastSlam`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
+#[serde(default, deny_unknown_fields)]
 pub struct SlamConfig {
     /// How readings find their landmark.
     pub correspondence: Correspondence,
     /// Unknown correspondences: a reading matches a landmark when its squared Mahalanobis
     /// distance is below the χ²(2 dof) quantile at this probability.
+    #[setting(above = 0.0, max = 1.0)]
     pub association_probability: f64,
     /// Unknown correspondences: a reading founds a new landmark only when its squared
     /// Mahalanobis distance to every landmark exceeds the χ²(2 dof) quantile at this (larger)
     /// probability; in between it is discarded.
+    #[setting(above = 0.0, max = 1.0)]
     pub new_landmark_probability: f64,
     /// Known correspondences: a reading beyond the χ²(2 dof) quantile at this probability is an
     /// outlier and refused; `None` takes every reading.
+    #[setting(above = 0.0, max = 1.0)]
     pub outlier_probability: Option<f64>,
     /// Readings with a range above this (m) are ignored: no beacon sensor reaches that far.
+    #[setting(above = 0.0)]
     pub max_range: f64,
 }
 

@@ -318,14 +318,14 @@ fn random_walk_inside_bounce_back_reports_its_bounces_through_the_trait() {
 #[test]
 fn bad_config_is_sanitized() {
     let c = BounceBackConfig {
-        d_th: 0.5,
-        d_release: 0.2,
+        d_th: Some(0.5),
+        d_release: Some(0.2),
         alpha: 7.0,
         cooldown: f64::NAN,
         ..Default::default()
     }
     .sanitized();
-    assert!(c.d_release > c.d_th);
+    assert!(c.d_release() > c.d_th());
     assert_eq!(c.alpha, 1.0);
     assert_eq!(c.cooldown, BounceBackConfig::default().cooldown);
 }
