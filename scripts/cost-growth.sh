@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# How the stack's cost grows (issue #13, deliverable 5): the realtime loop's latency (p50, p99)
+# How the stack's cost grows: the realtime loop's latency (p50, p99)
 # and the stack's CPU at 100 Hz, and lockstep steps/s, against
 #   - observers reading every topic (mole-observer): 0, 1, 4, 8;
 #   - the arena: 10, 20, 30, 40 m a side (the default scenario scaled, obstacles, beacons and

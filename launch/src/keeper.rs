@@ -20,17 +20,17 @@ const KEEPER_NODE: &str = "launcher.keeper";
 /// How long a restart waits for the keeper to write what it kept.
 const SAVE_TIMEOUT: Duration = Duration::from_secs(1);
 
-pub struct Keeper {
+pub struct ResumeKeeper {
     requests: Sender<SaveRequest>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     dir: PathBuf,
 }
 
-impl Keeper {
+impl ResumeKeeper {
     /// Starts keeping, before any process starts (so no sample goes unseen); the kept samples
     /// are written under `dir` on request.
-    pub fn start(common: &CommonArgs, dir: PathBuf) -> Result<Keeper, String> {
+    pub fn start(common: &CommonArgs, dir: PathBuf) -> Result<ResumeKeeper, String> {
         let mut topics: Vec<&'static str> = GRAPH
             .iter()
             .flat_map(|r| r.resumes_from())
@@ -46,7 +46,7 @@ impl Keeper {
             .name("keeper".into())
             .spawn(move || {
                 let keeper = Context::with_shutdown_flag(KEEPER_NODE, &common, flag)
-                    .and_then(|ctx| mole_runtime::Keeper::new(ctx, &topics, WORLD_TRUTH.name));
+                    .and_then(|ctx| mole_runtime::LastSamples::new(ctx, &topics, WORLD_TRUTH.name));
                 match keeper {
                     Ok(keeper) => {
                         let _ = ready_tx.send(Ok(()));
@@ -59,7 +59,7 @@ impl Keeper {
             })
             .map_err(|e| format!("cannot start the keeper thread: {e}"))?;
         match ready.recv() {
-            Ok(Ok(())) => Ok(Keeper {
+            Ok(Ok(())) => Ok(ResumeKeeper {
                 requests,
                 stop,
                 thread: Some(thread),
@@ -132,7 +132,7 @@ mod tests {
         let namespace = format!("keeper-test-{}", std::process::id());
         let common = CommonArgs::attach(&namespace, ClockMode::Realtime);
         let dir = std::env::temp_dir().join(format!("mole-keeper-test-{}", std::process::id()));
-        let keeper = Keeper::start(&common, dir.clone()).expect("a keeper");
+        let keeper = ResumeKeeper::start(&common, dir.clone()).expect("a keeper");
         let flag = Arc::new(AtomicBool::new(false));
         let estimator = Context::with_shutdown_flag("localization", &common, flag).expect("ctx");
         let mut pose = estimator.publisher(LOCALIZATION_POSE).expect("a publisher");

@@ -3,7 +3,7 @@
 //! The `mole` binary (src/main.rs) wires these to the command line and to the stack's IPC:
 //! [`load_launch_file`] → [`apply_swaps`] → [`start_order`] → [`Supervisor::spawn`] each process
 //! → [`Supervisor::poll`] while running (serving `mole swap` through [`hot_swap`]; a crashed
-//! role restarts from the last outputs the [`keeper::Keeper`] kept) →
+//! role restarts from the last outputs the [`keeper::ResumeKeeper`] kept) →
 //! [`Supervisor::shutdown`] in [`stop_order`].
 
 pub mod bench_ipc;

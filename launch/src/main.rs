@@ -24,11 +24,11 @@ use std::process::ExitCode;
 )]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: MoleCommand,
 }
 
 #[derive(Debug, Subcommand)]
-enum Command {
+enum MoleCommand {
     /// Start the stack, show progress, stop when done or on Ctrl-C, write summary.json and map.png.
     Up(UpArgs),
     /// Replace one process of a running stack (sensing, localization, mapping or planning) by
@@ -82,22 +82,22 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     mole_runtime::init_tracing("mole");
     let result = match cli.command {
-        Command::Up(args) => up(&args).map(drop),
-        Command::Swap(args) => swap(&args),
-        Command::Stop(args) => stop(&args),
-        Command::Status(args) => status(&args),
-        Command::Fault(args) => fault(&args),
-        Command::Param(args) => param(&args),
-        Command::Eval(args) => eval(&args),
-        Command::G2o(args) => g2o(&args),
-        Command::Top(args) => top(&args),
-        Command::Record(args) => record(&args),
-        Command::Replay(args) => replay(&args),
-        Command::View(args) => view(&args),
-        Command::Info(args) => info(&args),
-        Command::Export(args) => export(&args),
-        Command::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
-        Command::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),
+        MoleCommand::Up(args) => up(&args).map(drop),
+        MoleCommand::Swap(args) => swap(&args),
+        MoleCommand::Stop(args) => stop(&args),
+        MoleCommand::Status(args) => status(&args),
+        MoleCommand::Fault(args) => fault(&args),
+        MoleCommand::Param(args) => param(&args),
+        MoleCommand::Eval(args) => eval(&args),
+        MoleCommand::G2o(args) => g2o(&args),
+        MoleCommand::Top(args) => top(&args),
+        MoleCommand::Record(args) => record(&args),
+        MoleCommand::Replay(args) => replay(&args),
+        MoleCommand::View(args) => view(&args),
+        MoleCommand::Info(args) => info(&args),
+        MoleCommand::Export(args) => export(&args),
+        MoleCommand::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
+        MoleCommand::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

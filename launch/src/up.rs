@@ -7,7 +7,7 @@ mod prepare;
 
 use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
 use crate::inject::Injector;
-use crate::keeper::Keeper;
+use crate::keeper::ResumeKeeper;
 use crate::param::Tuner;
 use crate::record::{RecordPlan, Recorder};
 use crate::stats::StatsCollector;
@@ -330,7 +330,7 @@ struct Stack<'a> {
     plan: Plan,
     ports: Ports,
     /// Declared after `supervisor`'s users are done with it: see [`finish`].
-    keeper: Keeper,
+    keeper: ResumeKeeper,
     supervisor: Supervisor,
     /// `--record`: the recorder beside the stack.
     recorder: Option<Recorder>,
@@ -360,7 +360,7 @@ fn start(
         .map_err(|e| Failure::run(format!("cannot install the Ctrl-C handler: {e}")))?;
     let common = common_args(args, &plan);
     let ports = open_ports(&common, interrupted.clone()).map_err(Failure::run)?;
-    let keeper = Keeper::start(&common, args.out.join(RESUME_DIR)).map_err(Failure::run)?;
+    let keeper = ResumeKeeper::start(&common, args.out.join(RESUME_DIR)).map_err(Failure::run)?;
     let faults = Injector::new(&ports.ctx, plan.mode, plan.seed)
         .map_err(|e| Failure::run(format!("cannot open stack/faults: {e}")))?;
     let tuner = Tuner::new(&ports.ctx, plan.launch.settings)

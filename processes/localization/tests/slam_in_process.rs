@@ -57,7 +57,7 @@ fn scrambled() -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// No peeking (issue #12 item 5): the same readings with a world map whose beacon positions
+/// No peeking: the same readings with a world map whose beacon positions
 /// are scrambled give bit-identical pose, covariance and landmarks for every SLAM estimator.
 #[test]
 fn slam_estimators_never_read_the_true_beacon_positions() {

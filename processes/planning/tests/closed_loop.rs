@@ -239,7 +239,7 @@ fn lidar_run(seed: u64) {
         planner_by_kind(PlannerKind::RandomWalk, limits(), seed).unwrap_or_else(|e| panic!("{e}"));
     let o = run(p.as_mut(), 20_000, true);
     let r = limits().radius;
-    // The brief's bound is r/2 of penetration; with a lidar the robot should not touch at all.
+    // The contact model tolerates r/2 of penetration; with a lidar the robot should not touch at all.
     assert!(
         o.min_wall_distance > r,
         "touched a wall: centre {} m from it",
@@ -349,7 +349,7 @@ fn lidar_bounce_back_alone_keeps_a_blind_walk_off_the_walls() {
         let o = run(&mut p, 20_000, true);
         let r = limits().radius;
         assert!(o.bounces > 20, "{}", o.bounces);
-        // The brief's bound is r/2 of penetration; with a lidar the robot should not touch at all.
+        // The contact model tolerates r/2 of penetration; with a lidar the robot should not touch at all.
         assert!(
             o.min_wall_distance > r,
             "touched a wall: centre {} m from it",

@@ -105,31 +105,31 @@ impl Converter {
         let t = log_time;
         match topic {
             name if name == topics::WORLD_TRUTH.name => {
-                let truth: Truth = bytemuck::pod_read_unaligned(data);
+                let truth: Box<Truth> = boxed(data);
                 vec![
                     Converted::new("/truth", POSE_IN_FRAME, truth_pose(&truth, t)),
                     Converted::new("/tf", FRAME_TRANSFORM, robot_transform(&truth, t)),
                 ]
             }
             name if name == topics::LOCALIZATION_POSE.name => {
-                let pose: Pose = bytemuck::pod_read_unaligned(data);
+                let pose: Box<Pose> = boxed(data);
                 vec![
                     Converted::new("/pose", POSE_IN_FRAME, estimated_pose(&pose, t)),
                     Converted::new("/pose/ellipse", SCENE_UPDATE, pose_ellipse(&pose, t)),
                 ]
             }
             name if name == topics::SENSING_SCAN.name => {
-                let scan: Scan = bytemuck::pod_read_unaligned(data);
+                let scan: Box<Scan> = boxed(data);
                 vec![Converted::new("/scan", LASER_SCAN, laser_scan(&scan, t))]
             }
             name if name == topics::MAPPING_GRID.name => self.grid("/grid", t, data),
             name if name == topics::MAPPING_CONTACT.name => self.grid("/contact", t, data),
             name if name == topics::WORLD_MAP.name => {
-                let map: WorldMap = bytemuck::pod_read_unaligned(data);
+                let map: Box<WorldMap> = boxed(data);
                 vec![Converted::new("/map", SCENE_UPDATE, world_map(&map, t))]
             }
             name if name == topics::PLANNING_STATUS.name => {
-                let status: PlanStatus = bytemuck::pod_read_unaligned(data);
+                let status: Box<PlanStatus> = boxed(data);
                 vec![Converted::new(
                     "/path",
                     SCENE_UPDATE,
@@ -137,7 +137,7 @@ impl Converter {
                 )]
             }
             name if name == topics::LOCALIZATION_PARTICLES.name => {
-                let particles: Particles = bytemuck::pod_read_unaligned(data);
+                let particles: Box<Particles> = boxed(data);
                 vec![Converted::new(
                     "/particles",
                     SCENE_UPDATE,
@@ -145,7 +145,7 @@ impl Converter {
                 )]
             }
             name if name == topics::LOCALIZATION_LANDMARKS.name => {
-                let landmarks: Landmarks = bytemuck::pod_read_unaligned(data);
+                let landmarks: Box<Landmarks> = boxed(data);
                 vec![Converted::new(
                     "/landmarks",
                     SCENE_UPDATE,
@@ -167,13 +167,21 @@ impl Converter {
             return Vec::new();
         }
         self.last_grid.insert(channel, content.to_vec());
-        let grid: Grid = bytemuck::pod_read_unaligned(data);
+        let grid: Box<Grid> = boxed(data);
         vec![Converted::new(
             channel,
             schemas::GRID,
             occupancy_grid(&grid, log_time),
         )]
     }
+}
+
+/// A recorded message's bytes as the message, on the heap: grids and particle sets are
+/// hundreds of KiB. The bytes are the message's size (the tape's layout check saw to that).
+fn boxed<M: bytemuck::Pod>(data: &[u8]) -> Box<M> {
+    let mut message: Box<M> = bytemuck::zeroed_box();
+    bytemuck::bytes_of_mut(&mut *message).copy_from_slice(data);
+    message
 }
 
 /// A log time (ns) as Foxglove's `{sec, nsec}`.

@@ -1,6 +1,6 @@
 //! What a restarted process resumes from. A process that crashed cannot hand its last output to
 //! its successor the way a swapped one does (its publisher died with it), so the launcher keeps
-//! the newest sample of every topic a role resumes from ([`Keeper`], zero-copy: it holds the
+//! the newest sample of every topic a role resumes from ([`LastSamples`], zero-copy: it holds the
 //! loaned sample, it copies nothing per step) and, when the role dies, writes those samples into
 //! a directory the restarted process is pointed at (`MOLE_RESUME`). The files are the messages'
 //! own fixed-layout bytes, one per topic.
@@ -67,7 +67,7 @@ fn write_resume_file<M: Message>(dir: &Path, topic: &str, message: &M) -> std::i
     std::fs::rename(&partial, &path)
 }
 
-/// A request to a [`Keeper`]: write the kept samples of `topics` into `dir`; the reply is how
+/// A request to a [`LastSamples`]: write the kept samples of `topics` into `dir`; the reply is how
 /// many were written (topics nothing was published on yet are left out).
 pub struct SaveRequest {
     pub topics: Vec<&'static str>,
@@ -110,21 +110,21 @@ impl<M: Message> Kept for Subscriber<M> {
 }
 
 /// Keeps the newest sample of chosen topics of a namespace for restarted processes. It runs on
-/// a thread of its own ([`Keeper::serve`]). In lockstep a full queue would hold its publisher
+/// a thread of its own ([`LastSamples::serve`]). In lockstep a full queue would hold its publisher
 /// back, so it drains every queue each time the clock's topic (published once a step) wakes it:
 /// every kept topic is published at most once a step, and one wake-up a step costs the loop far
 /// less than one per topic (a wake-up per message took 35% off lockstep's steps/s). In realtime
 /// it is never woken and drains every [`REALTIME_DRAIN`].
-pub struct Keeper {
+pub struct LastSamples {
     ctx: Context,
     kept: Vec<Box<dyn Kept>>,
 }
 
-impl Keeper {
+impl LastSamples {
     /// A keeper of `names` (topics of `mole_types::topics`) on its own node, woken in lockstep
     /// by `clock` (one of them, published once a step); it publishes no statistics (it is part
     /// of the launcher, not a role).
-    pub fn new(mut ctx: Context, names: &[&str], clock: &str) -> Result<Keeper, RuntimeError> {
+    pub fn new(mut ctx: Context, names: &[&str], clock: &str) -> Result<LastSamples, RuntimeError> {
         ctx.silence_stats();
         struct Open<'a> {
             ctx: &'a Context,
@@ -169,7 +169,7 @@ impl Keeper {
             )));
         }
         let kept = open.kept;
-        Ok(Keeper { ctx, kept })
+        Ok(LastSamples { ctx, kept })
     }
 
     /// Keeps the newest samples and answers `requests` until the shutdown flag is set or the

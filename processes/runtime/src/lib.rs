@@ -44,7 +44,7 @@ pub use context::{CommonArgs, Context, PayloadLayout, STUCK_CONSUMER, layout_mis
 pub use control::{ControlCall, ControlClient, ControlServer};
 pub use doorbell::Ringer;
 pub use error::{BadInput, RuntimeError, exit_code};
-pub use keep::{Keeper, SaveRequest, read_resume_file, resume_file};
+pub use keep::{LastSamples, SaveRequest, read_resume_file, resume_file};
 pub use observe::Observation;
 pub use params::{MAX_PENDING, ScheduledChange, Tuning};
 pub use ports::{Publisher, Subscriber, Waker};

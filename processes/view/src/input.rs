@@ -12,7 +12,7 @@ pub const MAX_STEPS: u32 = mole_types::PACE_MAX_STEPS;
 
 /// A valid input from a page.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Command {
+pub enum PageInput {
     /// Go to (x, y) (m, world frame).
     Goal { x: f64, y: f64 },
     /// Run freely.
@@ -129,7 +129,7 @@ fn timeline_op(timeline: Timeline) -> Result<TimelineOp, Rejected> {
 /// Parses one input: `{"goal":{"x":X,"y":Y}}`, `{"pace":"pause"|"run"}`,
 /// `{"pace":"step","steps":N}` (N defaults to 1), or `{"timeline":{"op":"play"|"pause"}}`,
 /// `{"timeline":{"op":"seek","tick":N}}`, `{"timeline":{"op":"speed","speed":X}}`.
-pub fn parse_input(text: &str) -> Result<Command, Rejected> {
+pub fn parse_input(text: &str) -> Result<PageInput, Rejected> {
     if text.len() > MAX_INPUT_BYTES {
         return Err(Rejected::TooLong(text.len()));
     }
@@ -146,31 +146,31 @@ pub fn parse_input(text: &str) -> Result<Command, Rejected> {
     })?;
     match input {
         // JSON has no NaN or infinity, and serde_json refuses a number beyond f64's range.
-        Input::Goal { goal } => Ok(Command::Goal {
+        Input::Goal { goal } => Ok(PageInput::Goal {
             x: goal.x,
             y: goal.y,
         }),
         Input::Pace { pace, steps } => match (pace.as_str(), steps) {
-            ("step", None) => Ok(Command::Step { steps: 1 }),
+            ("step", None) => Ok(PageInput::Step { steps: 1 }),
             ("step", Some(n)) if (1..=u64::from(MAX_STEPS)).contains(&n) => {
-                Ok(Command::Step { steps: n as u32 })
+                Ok(PageInput::Step { steps: n as u32 })
             }
             ("step", Some(n)) => Err(Rejected::Steps(n)),
             ("run" | "pause", Some(_)) => Err(Rejected::StepsWithout(pace)),
-            ("run", None) => Ok(Command::Run),
-            ("pause", None) => Ok(Command::Pause),
+            ("run", None) => Ok(PageInput::Run),
+            ("pause", None) => Ok(PageInput::Pause),
             _ => Err(Rejected::UnknownPace(pace)),
         },
-        Input::Timeline { timeline } => timeline_op(timeline).map(Command::Timeline),
+        Input::Timeline { timeline } => timeline_op(timeline).map(PageInput::Timeline),
     }
 }
 
 /// Whether a view of `access` takes `command`: a live view goals and paces (while its controls
 /// are on), a recording's view timeline ops.
-pub fn admit(command: Command, access: Access) -> Result<Command, Rejected> {
+pub fn admit(command: PageInput, access: Access) -> Result<PageInput, Rejected> {
     match (command, access) {
-        (Command::Timeline(_), Access::Recording) => Ok(command),
-        (Command::Timeline(_), Access::Live { .. }) => Err(Rejected::NotRecording),
+        (PageInput::Timeline(_), Access::Recording) => Ok(command),
+        (PageInput::Timeline(_), Access::Live { .. }) => Err(Rejected::NotRecording),
         (_, Access::Recording) => Err(Rejected::Recording),
         (_, Access::Live { controls: false }) => Err(Rejected::ControlsOff),
         (_, Access::Live { controls: true }) => Ok(command),
@@ -186,17 +186,17 @@ mod tests {
     fn goals_and_paces_parse() {
         assert_eq!(
             parse_input(r#"{"goal":{"x":1.5,"y":-2}}"#),
-            Ok(Command::Goal { x: 1.5, y: -2.0 })
+            Ok(PageInput::Goal { x: 1.5, y: -2.0 })
         );
-        assert_eq!(parse_input(r#"{"pace":"pause"}"#), Ok(Command::Pause));
-        assert_eq!(parse_input(r#"{"pace":"run"}"#), Ok(Command::Run));
+        assert_eq!(parse_input(r#"{"pace":"pause"}"#), Ok(PageInput::Pause));
+        assert_eq!(parse_input(r#"{"pace":"run"}"#), Ok(PageInput::Run));
         assert_eq!(
             parse_input(r#"{"pace":"step"}"#),
-            Ok(Command::Step { steps: 1 })
+            Ok(PageInput::Step { steps: 1 })
         );
         assert_eq!(
             parse_input(r#"{"pace":"step","steps":25}"#),
-            Ok(Command::Step { steps: 25 })
+            Ok(PageInput::Step { steps: 25 })
         );
     }
 
@@ -205,7 +205,7 @@ mod tests {
     fn timeline_ops_parse() {
         let op = |text: &str| {
             parse_input(text).map(|c| match c {
-                Command::Timeline(op) => op,
+                PageInput::Timeline(op) => op,
                 other => panic!("{text} parsed to {other:?}"),
             })
         };
@@ -229,11 +229,11 @@ mod tests {
     /// takes timeline ops only.
     #[test]
     fn each_view_admits_only_its_own_inputs() {
-        let goal = Command::Goal { x: 1.0, y: 2.0 };
-        let seek = Command::Timeline(TimelineOp::Seek { tick: 3 });
+        let goal = PageInput::Goal { x: 1.0, y: 2.0 };
+        let seek = PageInput::Timeline(TimelineOp::Seek { tick: 3 });
         let live = Access::Live { controls: true };
         assert_eq!(admit(goal, live), Ok(goal));
-        assert_eq!(admit(Command::Pause, live), Ok(Command::Pause));
+        assert_eq!(admit(PageInput::Pause, live), Ok(PageInput::Pause));
         assert_eq!(admit(seek, live), Err(Rejected::NotRecording));
         let watching = Access::Live { controls: false };
         assert_eq!(admit(goal, watching), Err(Rejected::ControlsOff));
@@ -241,7 +241,7 @@ mod tests {
         assert_eq!(admit(seek, Access::Recording), Ok(seek));
         assert_eq!(admit(goal, Access::Recording), Err(Rejected::Recording));
         assert_eq!(
-            admit(Command::Step { steps: 2 }, Access::Recording),
+            admit(PageInput::Step { steps: 2 }, Access::Recording),
             Err(Rejected::Recording)
         );
     }

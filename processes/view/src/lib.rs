@@ -19,7 +19,7 @@ pub mod tiles;
 
 pub use frame_clock::{FRAME_PERIOD, FRAMES_PER_SECOND, FrameClock};
 pub use input::{
-    Access, Command, MAX_INPUT_BYTES, MAX_SPEED, MIN_SPEED, Rejected, TimelineOp, admit,
+    Access, MAX_INPUT_BYTES, MAX_SPEED, MIN_SPEED, PageInput, Rejected, TimelineOp, admit,
     parse_input,
 };
 pub use playback::{Clock, Playback, Reel, ReelError, Timeline, Track};

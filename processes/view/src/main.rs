@@ -18,7 +18,7 @@ mod taps;
 use clap::Parser;
 use mole_runtime::{BadInput, CommonArgs, Context, Publisher, Wake, now_ns};
 use mole_types::{Goal, PACE_PAUSE, PACE_RUN, PACE_STEP, Pace, topics};
-use mole_view::{Access, Command, DEFAULT_PORT, FrameClock, Playback, Reel, Scene};
+use mole_view::{Access, DEFAULT_PORT, FrameClock, PageInput, Playback, Reel, Scene};
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -68,26 +68,26 @@ impl Controls {
     /// Publishes `command` at `tick`; of several goals at once only the newest counts.
     fn publish(
         &mut self,
-        commands: Vec<Command>,
+        commands: Vec<PageInput>,
         tick: u64,
     ) -> Result<(), mole_runtime::RuntimeError> {
         let newest_goal = commands
             .iter()
-            .rposition(|c| matches!(c, Command::Goal { .. }));
+            .rposition(|c| matches!(c, PageInput::Goal { .. }));
         for (i, command) in commands.into_iter().enumerate() {
             tracing::info!(?command, tick, "from the page");
             let (op, steps) = match command {
-                Command::Goal { x, y } if Some(i) == newest_goal => {
+                PageInput::Goal { x, y } if Some(i) == newest_goal => {
                     self.goal
                         .publish(tick, now_ns(), |g| (g.x, g.y, g.tolerance) = (x, y, 0.0))?;
                     continue;
                 }
-                Command::Goal { .. } => continue,
-                Command::Run => (PACE_RUN, 0),
-                Command::Pause => (PACE_PAUSE, 0),
-                Command::Step { steps } => (PACE_STEP, steps),
+                PageInput::Goal { .. } => continue,
+                PageInput::Run => (PACE_RUN, 0),
+                PageInput::Pause => (PACE_PAUSE, 0),
+                PageInput::Step { steps } => (PACE_STEP, steps),
                 // The server refuses timeline ops in a live view.
-                Command::Timeline(_) => continue,
+                PageInput::Timeline(_) => continue,
             };
             self.pace
                 .publish(tick, now_ns(), |p| (p.op, p.steps) = (op, steps))?;
@@ -151,7 +151,7 @@ fn recording(file: &std::path::Path, args: &Args) -> Result<(), Box<dyn std::err
             continue;
         }
         for command in served.commands.try_iter() {
-            if let Command::Timeline(op) = command {
+            if let PageInput::Timeline(op) = command {
                 tracing::debug!(?op, "from the page");
                 playback.clock.apply(op);
             }
@@ -203,7 +203,7 @@ fn live(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     loop {
         let wake = waitset.wait(&mut ctx, Some(schedule.next()))?;
         taps.drain(&mut scene, mode.name(), !args.no_controls);
-        let commands: Vec<Command> = served.commands.try_iter().collect();
+        let commands: Vec<PageInput> = served.commands.try_iter().collect();
         if !commands.is_empty() {
             let tick = scene.as_ref().map_or(0, Scene::tick);
             controls.publish(commands, tick)?;

@@ -13,7 +13,7 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
-use mole_view::{Access, Client, Command, Frame, MAX_INPUT_BYTES, Rejected, admit, parse_input};
+use mole_view::{Access, Client, Frame, MAX_INPUT_BYTES, PageInput, Rejected, admit, parse_input};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
@@ -42,14 +42,14 @@ impl Frames {
 #[derive(Clone)]
 struct Shared {
     frames: broadcast::Sender<Arc<Frame>>,
-    commands: mpsc::Sender<Command>,
+    commands: mpsc::Sender<PageInput>,
     rejected: Arc<AtomicU64>,
     access: Access,
 }
 
 impl Shared {
     /// Takes one input: a valid command the view takes to the main loop, anything else counted.
-    fn take(&self, input: Result<Command, Rejected>) {
+    fn take(&self, input: Result<PageInput, Rejected>) {
         let refused = match input.and_then(|command| admit(command, self.access)) {
             Ok(command) => {
                 // An error is the main loop gone: the view is ending.
@@ -66,7 +66,7 @@ impl Shared {
 /// The server's ends in the main loop.
 pub struct Served {
     pub frames: Frames,
-    pub commands: mpsc::Receiver<Command>,
+    pub commands: mpsc::Receiver<PageInput>,
     /// Inputs refused so far.
     pub rejected: Arc<AtomicU64>,
 }
