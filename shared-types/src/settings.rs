@@ -279,7 +279,19 @@ pub trait Settings: Setting + Clone + Default + Serialize + DeserializeOwned {
         for part in key.split('.') {
             at = at.as_table()?.get(part)?;
         }
-        Some(at.to_string())
+        Some(match at {
+            // An `f32` setting reaches TOML widened: written as the `f32` it is (0.847, not
+            // 0.847000002861023), which reads back to the same value.
+            toml::Value::Float(v) if f64::from(*v as f32) == *v && v.is_finite() => {
+                let short = (*v as f32).to_string();
+                if short.contains(['.', 'e']) {
+                    short
+                } else {
+                    format!("{short}.0")
+                }
+            }
+            other => other.to_string(),
+        })
     }
 }
 
@@ -398,5 +410,27 @@ mod tests {
         assert!(e.expected.contains("the-inner.…"), "{e}");
         assert!(s.with("horizon", "1.0 2.0").is_err());
         assert!(s.check().is_ok());
+    }
+
+    /// A number reads back as written: an `f32` as the `f32` it is, an `f64` whole.
+    #[test]
+    fn numbers_are_written_as_their_own_type_reads_them() {
+        #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, Setting)]
+        struct Numbers {
+            /// Single.
+            single: f32,
+            /// Double.
+            double: f64,
+        }
+        let n = Numbers {
+            single: 0.847,
+            double: 0.1,
+        };
+        assert_eq!(n.get("single").as_deref(), Some("0.847"));
+        assert_eq!(n.get("double").as_deref(), Some("0.1"));
+        let whole = n.with("single", "3").unwrap();
+        assert_eq!(whole.get("single").as_deref(), Some("3.0"));
+        let back = n.with("single", &n.get("single").unwrap()).unwrap();
+        assert_eq!(back, n);
     }
 }
