@@ -123,9 +123,10 @@ fn a_setting_changed_while_running_is_taken_at_a_step_recorded_and_replayed() {
 }
 
 /// A change the process cannot take (the histogram filter builds its tables with the noise) is
-/// refused by it, with its reason and exit 1, and nothing changes.
+/// refused by it, with its reason and exit 1, and nothing changes; a change taken survives a
+/// crash: the restarted process starts with it.
 #[test]
-fn a_change_the_process_cannot_take_is_refused_with_its_reason() {
+fn a_change_the_process_cannot_take_is_refused_and_one_taken_survives_a_crash() {
     let _serial = serial();
     let stack = Stack::start(
         "params-refused",
@@ -147,6 +148,25 @@ fn a_change_the_process_cannot_take_is_refused_with_its_reason() {
     assert!(text.contains("tables"), "{text}");
     let got = param(&ns, &["get", "localization", "noise.odom_v_std"]);
     assert_eq!(output_text(&got).trim(), "unset");
+
+    let set = param(&ns, &["set", "planning", "random-walk.stride", "0.6"]);
+    assert!(set.status.success(), "{}", output_text(&set));
+    let planning = Role::Planning.spec().program;
+    let victim = pid_of(&ns, planning).expect("a planning process");
+    let killed = run_mole(&["fault", "kill", "planning", "--namespace", &ns]);
+    assert!(killed.status.success(), "{}", output_text(&killed));
+    wait_for_new_pid(
+        &ns,
+        planning,
+        Some(victim),
+        Duration::from_secs(30),
+        &stack.out,
+    );
+    stack.wait_for_log(
+        Role::Planning.name(),
+        "settings other than the defaults: random-walk.stride = 0.6",
+        Duration::from_secs(30),
+    );
     let stopped = run_mole(&["stop", "--namespace", &ns]);
     assert!(stopped.status.success(), "{}", output_text(&stopped));
     let output = stack.wait(RUN_TIMEOUT);

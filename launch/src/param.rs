@@ -75,6 +75,8 @@ pub struct SettingChange {
 /// The launcher's side: the settings in force, and the requests it hands to processes.
 pub struct Tuner {
     settings: StackSettings,
+    /// The changes a replay scheduled (handed to a restarted process again).
+    scheduled: Vec<mole_runtime::ScheduledChange>,
     requests: Publisher<ParamChange>,
     answers: Subscriber<ParamChange>,
     sent: u32,
@@ -87,14 +89,25 @@ pub type Answer = (u32, String);
 
 impl Tuner {
     /// The launcher's tuner for a stack started with `settings`.
-    pub fn new(ctx: &Context, settings: StackSettings) -> Result<Tuner, RuntimeError> {
+    pub fn new(
+        ctx: &Context,
+        settings: StackSettings,
+        scheduled: Vec<mole_runtime::ScheduledChange>,
+    ) -> Result<Tuner, RuntimeError> {
         Ok(Tuner {
             settings,
+            scheduled,
             requests: ctx.publisher(topics::STACK_PARAMS)?,
             answers: ctx.passive_subscriber(topics::STACK_PARAMS)?,
             sent: 0,
             changes: Vec::new(),
         })
+    }
+
+    /// `MOLE_SETTINGS` for a process restarted now: the settings in force (the start's with
+    /// every change `mole param` made) and a replay's schedule.
+    pub fn settings_json(&self) -> String {
+        self.settings.to_json_with(&self.scheduled)
     }
 
     /// Answers `mole param` with `words` (`list ROLE`, `get ROLE KEY`, `set ROLE KEY VALUE`).

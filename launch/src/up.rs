@@ -363,8 +363,12 @@ fn start(
     let keeper = ResumeKeeper::start(&common, args.out.join(RESUME_DIR)).map_err(Failure::run)?;
     let faults = Injector::new(&ports.ctx, plan.mode, plan.seed)
         .map_err(|e| Failure::run(format!("cannot open stack/faults: {e}")))?;
-    let tuner = Tuner::new(&ports.ctx, plan.launch.settings)
-        .map_err(|e| Failure::run(format!("cannot open stack/params: {e}")))?;
+    let tuner = Tuner::new(
+        &ports.ctx,
+        plan.launch.settings,
+        args.settings_changes.clone(),
+    )
+    .map_err(|e| Failure::run(format!("cannot open stack/params: {e}")))?;
     let recorder = recording
         .map(|r| r.start(&plan.env, log_of(args, "recorder")))
         .transpose()?;
@@ -687,12 +691,14 @@ fn follow_progress(stack: &mut Stack<'_>) -> Option<RunEnd> {
 }
 
 /// What the supervisor saw; a role it restarts after a crash resumes from the outputs the
-/// keeper kept.
+/// keeper kept, with the settings in force (those `mole param` changed included).
 fn poll_supervisor(stack: &mut Stack<'_>) -> Vec<SupervisorEvent> {
-    let keeper = &stack.keeper;
-    stack
-        .supervisor
-        .poll_with(|role, attempt| keeper.before_restart(role, attempt))
+    let (keeper, tuner) = (&stack.keeper, &stack.tuner);
+    stack.supervisor.poll_with(|role, attempt| {
+        let mut env = keeper.before_restart(role, attempt);
+        env.push((mole_types::env::SETTINGS.to_owned(), tuner.settings_json()));
+        env
+    })
 }
 
 /// Acts on what the supervisor saw: exits, restarts, roles it gave up on.

@@ -71,6 +71,18 @@ impl<T: Settings> Tuning<T> {
     /// changes a replay scheduled.
     pub(crate) fn new(ctx: &Context, args: &CommonArgs, role: Role) -> Result<Self, BadInput> {
         let current = args.settings::<T>(role)?;
+        let defaults = T::default();
+        let tuned: Vec<String> = T::keys()
+            .into_iter()
+            .filter_map(|k| {
+                let value = current.get(&k.path)?;
+                (defaults.get(&k.path).as_ref() != Some(&value))
+                    .then(|| format!("{} = {value}", k.path))
+            })
+            .collect();
+        if !tuned.is_empty() {
+            tracing::info!("settings other than the defaults: {}", tuned.join(", "));
+        }
         let scheduled = args.scheduled_changes(role)?;
         if scheduled.len() > MAX_PENDING {
             return Err(BadInput(format!(
