@@ -7,10 +7,10 @@ use crate::settings::StackSettings;
 use crate::up::Failure;
 use clap::{Args, Subcommand};
 use mole_runtime::{Context, Publisher, RuntimeError, Subscriber, now_ns};
-use mole_types::settings::Settings;
+use mole_types::settings::{Key, Settings};
 use mole_types::{
     CONTROL_FAILED, CONTROL_OK, CONTROL_PARAM, CONTROL_REFUSED, ControlRequest, PARAM_APPLIED,
-    PARAM_REFUSED, PARAM_REQUESTED, ParamChange, Role, read_name, topics, write_name,
+    PARAM_REFUSED, PARAM_REQUESTED, ParamChange, read_name, topics, write_name,
 };
 use serde::Serialize;
 use std::time::{Duration, Instant};
@@ -118,16 +118,20 @@ impl Tuner {
             [_, role, ..] => *role,
             _ => return refused("expected list ROLE, get ROLE KEY or set ROLE KEY VALUE".into()),
         };
-        let keys = match role.parse::<Role>() {
-            Ok(Role::Planning) => mole_planning::Settings::keys(),
-            Ok(Role::Localization) => mole_localization::Settings::keys(),
-            Ok(Role::Mapping) => mole_mapping::Settings::keys(),
-            _ => {
-                return refused(format!(
-                    "role `{role}` has no settings: planning, localization or mapping"
-                ));
-            }
-        };
+        // A role's keys are the stack's under its table; a role without a table has none.
+        let prefix = format!("{role}.");
+        let keys: Vec<Key> = StackSettings::keys()
+            .into_iter()
+            .filter_map(|k| {
+                let path = k.path.strip_prefix(&prefix)?.to_owned();
+                Some(Key { path, ..k })
+            })
+            .collect();
+        if keys.is_empty() {
+            return refused(format!(
+                "role `{role}` has no settings: planning, localization or mapping"
+            ));
+        }
         let value_of = |key: &str| {
             self.settings
                 .get(&format!("{role}.{key}"))
@@ -180,13 +184,7 @@ impl Tuner {
 
     /// Checks `role.key = value` against the settings in force, hands it to the role's process
     /// and waits for its answer.
-    fn set(
-        &mut self,
-        role: &str,
-        key: &str,
-        value: &str,
-        keys: &[mole_types::settings::Key],
-    ) -> Answer {
+    fn set(&mut self, role: &str, key: &str, value: &str, keys: &[Key]) -> Answer {
         let full = format!("{role}.{key}");
         let new = match self.settings.with(&full, value) {
             Ok(new) => new,
