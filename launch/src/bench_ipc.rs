@@ -4,9 +4,9 @@
 //! The launcher does not link zenoh: the zenoh rows come from mole-bridge's `mole-zenoh-bench`
 //! (found next to `mole`, like the stack's programs), which prints its samples as JSON.
 
+use crate::Failure;
 use crate::bench_stack::check_writable;
 use crate::supervisor::resolve_program;
-use crate::up::Failure;
 use clap::Args;
 use mole_bench::{
     BenchError, IpcBenchConfig, IpcReport, Summary, ZenohLatencyPoint, ZenohReport,

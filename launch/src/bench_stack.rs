@@ -1,8 +1,9 @@
 //! `mole bench stack`: runs the full stack and reports how fast it went and where time went;
 //! with `--targets`, measures the loop against raw iceoryx2 in one run (issue #13's targets).
 
+use crate::Failure;
 use crate::stats::{HopLatency, ProcessUsage};
-use crate::up::{Failure, UpArgs, up};
+use crate::up::{UpArgs, up};
 use clap::Args;
 use mole_monitor::LatencyUs;
 use serde::Serialize;

@@ -1,8 +1,8 @@
 //! `mole swap`, `mole stop`, `mole status`: one request each to a running `mole up`, through
 //! its `stack/control` request-response service.
 
+use crate::Failure;
 use crate::swap::split_words;
-use crate::up::Failure;
 use clap::Args;
 use mole_runtime::ControlClient;
 use mole_types::{

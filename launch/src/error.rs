@@ -1,4 +1,5 @@
-//! The one error type of the launcher library.
+//! The launcher's errors, at the bottom of its layers: [`LaunchError`] for the library's
+//! operations and [`Failure`], what a `mole` command exits with.
 
 use std::io;
 use std::path::PathBuf;
@@ -120,14 +121,22 @@ pub enum LaunchError {
 }
 
 impl LaunchError {
-    /// Process exit code for this error: 2 for bad input (files, arguments), 1 for failures of
-    /// the operating system while running the stack.
+    /// Bad input (files, arguments, a swap of a role that is not running) or a failure of the
+    /// operating system while running the stack.
+    #[must_use]
+    pub fn kind(&self) -> FailureKind {
+        match self {
+            Self::Spawn { .. } | Self::Log { .. } | Self::AlreadyRunning { .. } => {
+                FailureKind::Failed
+            }
+            _ => FailureKind::BadInput,
+        }
+    }
+
+    /// Process exit code for this error: 2 for bad input, 1 for a failure while running.
     #[must_use]
     pub fn exit_code(&self) -> i32 {
-        match self {
-            Self::Spawn { .. } | Self::Log { .. } | Self::AlreadyRunning { .. } => 1,
-            _ => 2,
-        }
+        i32::from(self.kind().exit_code())
     }
 }
 
@@ -146,5 +155,67 @@ fn located(
             "{}:{line}:{column}: field `{field}`: {message}",
             file.display()
         )
+    }
+}
+
+/// Why a `mole` command failed; the exit code follows from it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailureKind {
+    /// Bad input: a file, an argument or a setting was wrong. Exit code 2, before anything starts
+    /// where the input can be checked up front; running again unchanged cannot help.
+    BadInput,
+    /// The run itself failed: a process beyond its restart policy, a stall, the operating system.
+    /// Exit code 1.
+    Failed,
+}
+
+impl FailureKind {
+    /// 2 for bad input, 1 for a failed run.
+    #[must_use]
+    pub fn exit_code(self) -> u8 {
+        match self {
+            FailureKind::BadInput => 2,
+            FailureKind::Failed => 1,
+        }
+    }
+}
+
+/// A failure of a `mole` command: its kind and one line naming what and where.
+#[derive(Debug)]
+pub struct Failure {
+    pub kind: FailureKind,
+    pub message: String,
+}
+
+impl Failure {
+    /// Bad input (exit code 2).
+    pub fn input(message: impl Into<String>) -> Self {
+        Self {
+            kind: FailureKind::BadInput,
+            message: message.into(),
+        }
+    }
+
+    /// A failure of the run (exit code 1).
+    pub fn run(message: impl Into<String>) -> Self {
+        Self {
+            kind: FailureKind::Failed,
+            message: message.into(),
+        }
+    }
+
+    /// The process exit code this failure deserves.
+    #[must_use]
+    pub fn exit_code(&self) -> u8 {
+        self.kind.exit_code()
+    }
+}
+
+impl From<LaunchError> for Failure {
+    fn from(error: LaunchError) -> Self {
+        Self {
+            kind: error.kind(),
+            message: error.to_string(),
+        }
     }
 }

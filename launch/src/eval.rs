@@ -11,8 +11,9 @@ pub mod check;
 pub mod metrics;
 pub mod plot;
 
+use crate::Failure;
 use crate::parse_swap;
-use crate::up::{Failure, RunEnd, build_process_binaries, choices};
+use crate::up::{RunEnd, build_process_binaries, choices};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use metrics::{Aggregate, WorldInfo, WorldMetrics, aggregate, regressions};

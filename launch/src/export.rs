@@ -2,7 +2,7 @@
 //! so Foxglove or Lichtblick opens it without a plug-in (the conversion is
 //! `mole_recorder::foxglove`).
 
-use crate::up::Failure;
+use crate::Failure;
 use clap::Args;
 use std::io::Write as _;
 use std::path::PathBuf;

@@ -3,7 +3,7 @@
 //! is one `stack/control` request to the running `mole up`, which carries it out and publishes
 //! it on `stack/faults` (see `crate::inject`).
 
-use crate::up::Failure;
+use crate::Failure;
 use clap::{Args, Subcommand};
 use mole_runtime::{CommonArgs, Context, ControlClient, stack_clock_mode};
 use mole_types::fault::faultable_topics;
@@ -308,7 +308,7 @@ fn run_chaos(namespace: &str, args: &ChaosArgs) -> Result<(), Failure> {
                 entry.0 += 1;
                 println!("{:7.2} s  {line}", start.elapsed().as_secs_f64());
             }
-            Err(f) if f.code == 2 => {
+            Err(f) if f.kind == crate::FailureKind::BadInput => {
                 entry.1 += 1;
                 println!(
                     "{:7.2} s  refused: {}",

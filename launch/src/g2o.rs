@@ -2,7 +2,7 @@
 //! Levenberg–Marquardt (`mole_localization::graph_slam::g2o`, algorithms §6.9.4 "g2o graphs
 //! and GTSAM").
 
-use crate::up::Failure;
+use crate::Failure;
 use clap::Args;
 use mole_localization::graph_slam::g2o::{DEFAULT_ITERATIONS, G2oGraph, solver_config};
 use std::path::PathBuf;

@@ -134,7 +134,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("mole-keeper-test-{}", std::process::id()));
         let keeper = ResumeKeeper::start(&common, dir.clone()).expect("a keeper");
         let flag = Arc::new(AtomicBool::new(false));
-        let estimator = Context::with_shutdown_flag("localization", &common, flag).expect("ctx");
+        let estimator =
+            Context::with_shutdown_flag(Role::Localization.name(), &common, flag).expect("ctx");
         let mut pose = estimator.publisher(LOCALIZATION_POSE).expect("a publisher");
         for tick in 1..=3 {
             pose.publish(tick, 0, |p| {

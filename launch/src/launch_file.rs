@@ -20,7 +20,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::LaunchError;
-use crate::order;
+
 use crate::settings::StackSettings;
 use mole_types::settings::Settings;
 
@@ -772,5 +772,6 @@ fn is_extra_observer(role: &str) -> bool {
     })
 }
 
+pub mod order;
 #[cfg(test)]
 mod tests;

@@ -18,12 +18,13 @@ pub mod hot_swap;
 pub mod inject;
 pub mod keeper;
 pub mod launch_file;
-pub mod order;
+pub mod names;
 pub mod param;
 pub mod record;
 pub mod replay;
 pub mod settings;
 pub mod sidecar;
+pub mod stand_in;
 pub mod stats;
 pub mod supervisor;
 pub mod swap;
@@ -31,12 +32,12 @@ pub mod top;
 pub mod up;
 pub mod view;
 
-pub use error::LaunchError;
+pub use error::{Failure, FailureKind, LaunchError};
+pub use launch_file::order::{start_order, stop_order};
 pub use launch_file::{
     DEFAULT_LAUNCH_FILE, LaunchFile, ProcessSpec, RestartPolicy, RestartWhen, StackOverrides,
     StackSpec, load_launch_file, parse_launch_file, resolve_data_path,
 };
-pub use order::{start_order, stop_order};
 pub use supervisor::{
     ChildSpec, ExitStatus, Supervisor, SupervisorEvent, resolve_program, resolve_program_in,
 };

@@ -3,8 +3,8 @@
 //! settings in force and hands a `set` it has checked to the role's process on `stack/params`,
 //! which takes it before its next step (or refuses it, saying why) and says so on the same topic.
 
+use crate::Failure;
 use crate::settings::StackSettings;
-use crate::up::Failure;
 use clap::{Args, Subcommand};
 use mole_runtime::{Context, Publisher, RuntimeError, Subscriber, now_ns};
 use mole_types::settings::{Key, Settings};

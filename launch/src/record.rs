@@ -5,9 +5,9 @@
 //! its roles: a [`Sidecar`], stopped after every role (it records up to the last sample); if it
 //! dies the run goes on, unrecorded from then, with a warning.
 
+use crate::Failure;
 use crate::RestartPolicy;
 use crate::sidecar::{self, Attached, Sidecar};
-use crate::up::Failure;
 use clap::Args;
 use mole_recorder::{Every, read_info};
 use mole_types::env;

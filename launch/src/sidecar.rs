@@ -5,8 +5,9 @@
 //! it dies the run goes on without it, with a warning. Attached to a running stack (`mole
 //! record`, `mole view`) it runs until Ctrl-C or the stack ends.
 
+use crate::Failure;
+use crate::names::LAUNCHER_NODE;
 use crate::supervisor::EXIT_BAD_INPUT;
-use crate::up::{Failure, LAUNCHER_NODE};
 use crate::{ChildSpec, ExitStatus, RestartPolicy, Supervisor, SupervisorEvent, resolve_program};
 use mole_runtime::{cleanup_dead_nodes, live_nodes_in_namespace, stack_clock_mode};
 use mole_types::ClockMode;
@@ -79,7 +80,7 @@ impl Sidecar {
         let deadline = Instant::now() + READY_TIMEOUT;
         while !ready.exists() {
             if let Some(status) = exit_of(&mut supervisor) {
-                let line = crate::up::last_error_line(&log_path);
+                let line = crate::supervisor::last_error_line(&log_path);
                 return Err(match status {
                     ExitStatus::Code(EXIT_BAD_INPUT) => {
                         Failure::input(format!("the {name} refused its input: {line}"))

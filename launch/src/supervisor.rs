@@ -673,3 +673,15 @@ fn is_executable(p: &Path) -> bool {
 
 #[cfg(test)]
 mod tests;
+
+/// The last `error:` line of a process log (or where the log is).
+pub(crate) fn last_error_line(log: &Path) -> String {
+    std::fs::read_to_string(log)
+        .ok()
+        .and_then(|text| {
+            text.lines()
+                .rev()
+                .find_map(|l| l.strip_prefix("error: ").map(str::to_string))
+        })
+        .unwrap_or_else(|| format!("see {}", log.display()))
+}

@@ -1,7 +1,8 @@
 //! `mole top`: a live view of a running stack (topics, processes), refreshed every second.
 
+use crate::Failure;
+use crate::names::{LAUNCHER_NODE, TOP_ROLE};
 use crate::stats::StatsCollector;
-use crate::up::{Failure, LAUNCHER_NODE};
 use clap::Args;
 use mole_runtime::{ClockMode, CommonArgs, Context, Subscriber, live_nodes_in_namespace};
 use mole_types::{
@@ -14,9 +15,6 @@ use std::io::Write as _;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-
-/// The node name `mole top` uses; it does not count as a stack in the namespace.
-pub const TOP_ROLE: &str = "top";
 
 #[derive(Debug, Args)]
 pub struct TopArgs {

@@ -7,8 +7,8 @@
 //! `view: URL`. A recording's view (`mole-view --file FILE`) needs no stack and opens no IPC: the
 //! launcher only starts it, prints its URL and stops it at Ctrl-C.
 
+use crate::Failure;
 use crate::sidecar::{self, Attached, Sidecar};
-use crate::up::Failure;
 use crate::{RestartPolicy, RestartWhen};
 use clap::Args;
 use mole_types::env;

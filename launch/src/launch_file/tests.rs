@@ -234,7 +234,7 @@ fn extra_observers_are_accepted_and_stop_last() {
         roles,
         ["sensing", "planning", "world", "observer-1", "observer-a-2"]
     );
-    let stops = crate::order::stop_order(&file.processes);
+    let stops = crate::stop_order(&file.processes);
     let last: Vec<&str> = stops[3..]
         .iter()
         .map(|&i| file.processes[i].role.as_str())

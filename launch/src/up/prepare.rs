@@ -229,7 +229,7 @@ fn default_launch_file() -> PathBuf {
 fn refuse_namespace_in_use(namespace: &str) -> Result<(), Failure> {
     let live: Vec<String> = live_nodes_in_namespace(namespace)
         .into_iter()
-        .filter(|n| !n.ends_with(&format!("/{}", crate::top::TOP_ROLE)))
+        .filter(|n| !n.ends_with(&format!("/{}", crate::names::TOP_ROLE)))
         .collect();
     if live.is_empty() {
         return Ok(());
@@ -316,7 +316,7 @@ mod tests {
         match check_goal(planner, goal, &arena()) {
             Ok(()) => panic!("{planner} with {goal:?} was accepted"),
             Err(f) => {
-                assert_eq!(f.code, 2);
+                assert_eq!(f.kind, crate::FailureKind::BadInput);
                 f.message
             }
         }

@@ -13,7 +13,7 @@ use mole_localization::{
     EstimatorKind, NoiseModel, Readings, Settings, odometry_since, start_estimator,
 };
 use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule, now_ns};
-use mole_types::{env, topics};
+use mole_types::{Role, env, topics};
 use std::process::ExitCode;
 
 /// Publish the particle set every this many steps: plenty for a picture or a viewer, and it
@@ -44,7 +44,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         .peers
         .checked(kind, &args.common.namespace)
         .map_err(|e| BadInput(e.to_string()))?;
-    let mut p = Process::new("localization", &args.common)?;
+    let mut p = Process::new(Role::Localization.name(), &args.common)?;
     let tuning = p.tuning::<Settings>(&args.common)?;
     let settings = *tuning.settings();
     // A replacement (a swap, a restart) goes on from the estimate and SLAM map before it.

@@ -8,7 +8,7 @@
 use clap::Parser;
 use mole_mapping::{Maps, Settings};
 use mole_runtime::{CommonArgs, Order, Process, Rule};
-use mole_types::{Pose2, topics};
+use mole_types::{Pose2, Role, topics};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -26,7 +26,7 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let mut p = Process::new("mapping", &args.common)?;
+    let mut p = Process::new(Role::Mapping.name(), &args.common)?;
     let tuning = p.tuning::<Settings>(&args.common)?;
     let settings = *tuning.settings();
     // A replacement goes on from the grids of the one it replaces (the frontier grid is

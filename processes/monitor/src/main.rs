@@ -6,7 +6,7 @@
 use clap::Parser;
 use mole_monitor::{Ending, Monitor, RunEnding, RunMeta};
 use mole_runtime::{CommonArgs, Flow, Process, now_ns};
-use mole_types::{EstimatorKind, Message, PlannerKind, env, topics};
+use mole_types::{EstimatorKind, Message, PlannerKind, Role, env, topics};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -35,7 +35,7 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let mut p = Process::new("monitor", &args.common)?;
+    let mut p = Process::new(Role::Monitor.name(), &args.common)?;
     // The truth and the frontier grid wake the monitor; the rest is read on those wake-ups.
     let truth = p.observed(topics::WORLD_TRUTH, true)?;
     let pose = p.observed(topics::LOCALIZATION_POSE, false)?;

@@ -10,7 +10,7 @@
 use clap::Parser;
 use mole_planning::{Command, OperatorGoals, PlannerConfig, PlannerInput, RobotLimits, Settings};
 use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule};
-use mole_types::{PlannerKind, Pose2, env, topics};
+use mole_types::{PlannerKind, Pose2, Role, env, topics};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -36,7 +36,7 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let mut p = Process::new("planning", &args.common)?;
+    let mut p = Process::new(Role::Planning.name(), &args.common)?;
     let pose = p.trigger(topics::LOCALIZATION_POSE, Order::Newest)?;
     let scan = p.input(topics::SENSING_SCAN, Rule::SameTick)?;
     let tactile = p.input(topics::SENSING_TACTILE, Rule::SameTick)?;

@@ -7,7 +7,7 @@
 //! `init` (once, from the map) and `step` (once per step).
 //!
 //! ```text
-//! let mut p = Process::new("planning", &args.common)?;
+//! let mut p = Process::new(Role::Planning.name(), &args.common)?;
 //! let pose = p.trigger(topics::LOCALIZATION_POSE, Order::Newest)?;
 //! let scan = p.input(topics::SENSING_SCAN, Rule::SameTick)?;
 //! let grid = p.input(topics::MAPPING_GRID, Rule::PreviousTick)?;

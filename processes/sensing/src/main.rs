@@ -5,7 +5,7 @@
 use clap::Parser;
 use mole_runtime::{CommonArgs, Order, Process};
 use mole_sensing::Sensing;
-use mole_types::topics;
+use mole_types::{Role, topics};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -23,7 +23,7 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let mut p = Process::new("sensing", &args.common)?;
+    let mut p = Process::new(Role::Sensing.name(), &args.common)?;
     // A replacement (a restart, a swap) goes on in the odom frame of the one before it.
     let odom_was = p.resume_from(topics::SENSING_ODOM)?;
     let truth = p.trigger(topics::WORLD_TRUTH, Order::Newest)?;

@@ -7,7 +7,7 @@
 
 use clap::Parser;
 use mole_runtime::{ClockEvent, CommonArgs, Flow, Order, Process, now_ns};
-use mole_types::{EndReason, TICK_END, env, topics};
+use mole_types::{EndReason, Role, TICK_END, env, topics};
 use mole_world::{World, load_scenario};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -42,7 +42,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut scenario =
         load_scenario(&args.scenario).map_err(|e| mole_runtime::BadInput(e.to_string()))?;
     scenario.seed = args.common.seed.unwrap_or(scenario.seed);
-    let mut p = Process::new("world", &args.common)?;
+    let mut p = Process::new(Role::World.name(), &args.common)?;
     if args.paused {
         p.start_held();
     }

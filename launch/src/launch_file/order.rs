@@ -1,8 +1,8 @@
 //! Start order of the processes of a stack, from their `depends_on` lists; stop order, from the
 //! graph's stop ranks.
 
+use super::ProcessSpec;
 use crate::LaunchError;
-use crate::launch_file::ProcessSpec;
 use mole_types::graph;
 
 /// Topological order (Kahn 1962): each process after everything it depends on; among processes
