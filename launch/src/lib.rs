@@ -6,6 +6,7 @@
 //! role restarts from the last outputs the [`keeper::ResumeKeeper`] kept) →
 //! [`Supervisor::shutdown`] in [`stop_order`].
 
+pub mod bench;
 pub mod bench_ipc;
 pub mod bench_stack;
 pub mod control;

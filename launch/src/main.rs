@@ -1,8 +1,7 @@
 //! `mole`: starts the stack with one command, supervises it, and measures it.
 
 use clap::{Parser, Subcommand};
-use mole_launch::bench_ipc::{BenchIpcArgs, bench_ipc};
-use mole_launch::bench_stack::{BenchStackArgs, bench_stack};
+use mole_launch::bench::{BenchCommand, bench};
 use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
 use mole_launch::eval::{EvalArgs, eval};
 use mole_launch::export::{ExportArgs, export};
@@ -69,15 +68,6 @@ enum MoleCommand {
     Bench(BenchCommand),
 }
 
-#[derive(Debug, Subcommand)]
-enum BenchCommand {
-    /// Latency, throughput, fan-out and a five-hop chain: the runtime, raw iceoryx2, a Unix
-    /// socket and TCP, payloads from 64 B to 4 MiB.
-    Ipc(BenchIpcArgs),
-    /// Run the full stack and report steps/s, loop latency, per-hop latency, CPU and memory.
-    Stack(Box<BenchStackArgs>),
-}
-
 fn main() -> ExitCode {
     let cli = Cli::parse();
     mole_runtime::init_tracing("mole");
@@ -96,8 +86,7 @@ fn main() -> ExitCode {
         MoleCommand::View(args) => view(&args),
         MoleCommand::Info(args) => info(&args),
         MoleCommand::Export(args) => export(&args),
-        MoleCommand::Bench(BenchCommand::Ipc(args)) => bench_ipc(&args).map(drop),
-        MoleCommand::Bench(BenchCommand::Stack(args)) => bench_stack(&args).map(drop),
+        MoleCommand::Bench(command) => bench(&command),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -91,6 +91,38 @@ impl<'a> Readings<'a> {
     }
 }
 
+/// Publish the particle set every this many steps: plenty for a picture or a viewer, and it
+/// keeps 256 KiB per step off the bus.
+pub const PARTICLES_EVERY: u64 = 10;
+
+/// The odometry pose of the step handled last and the world's step: what [`odometry_since`]
+/// needs from one step to the next.
+#[derive(Debug, Clone, Copy)]
+pub struct Odometer {
+    before: Option<[f64; 3]>,
+    tick_dt: f64,
+}
+
+impl Odometer {
+    /// From a predecessor's last odometry pose (a swap, a restart), or none on a fresh start.
+    pub fn new(before: Option<[f64; 3]>, tick_dt: f64) -> Self {
+        Self { before, tick_dt }
+    }
+
+    /// The odometry this step predicts with ([`odometry_since`], `ticks` since the step handled
+    /// last); remembers `measured`'s pose for the next.
+    pub fn step(&mut self, measured: &Odom, ticks: Option<u64>) -> Odom {
+        let odom = odometry_since(measured, self.before, ticks, self.tick_dt);
+        self.before = Some([measured.x, measured.y, measured.theta]);
+        odom
+    }
+
+    /// The odometry pose of the step handled last (zero before the first).
+    pub fn pose(&self) -> [f64; 3] {
+        self.before.unwrap_or_default()
+    }
+}
+
 /// The odometry a step predicts with, given the odometry pose of the step handled before
 /// (`before`; none on a fresh start) and how many world steps of `tick_dt` ago that was. One
 /// step: the velocities measured over it. After a gap (this process stopped or restarted, a

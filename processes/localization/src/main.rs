@@ -1,24 +1,18 @@
 //! The localization process: estimates the pose from odometry, beacons and position fixes; the
 //! SLAM estimators estimate the beacon map too.
 //!
-//! world/map once, then sensing/{odom, beacons, fix, tactile} every step (the tactile ring for
-//! the wheels' slide along a wall) → localization/pose, and
-//! localization/particles (PF) or localization/landmarks (SLAM), and localization/trajectory
-//! after each smoother solve (GraphSLAM). With `--peer` (EKF-SLAM) the landmarks are offered to
-//! another robot on peers/localization/landmarks too, and its offer is fused into them.
+//! world/map once, then sensing/{odom, beacons, fix, tactile} every step → localization/pose,
+//! /particles (PF), /landmarks (SLAM) and /trajectory after each smoother solve (GraphSLAM).
+//! With `--peer` (EKF-SLAM) the landmarks are offered to another robot and its offer fused in.
 
 use clap::Parser;
 use mole_localization::slam::{PEER_LANDMARKS, PeerArgs, PeerFusion};
 use mole_localization::{
-    EstimatorKind, NoiseModel, Readings, Settings, odometry_since, start_estimator,
+    EstimatorKind, NoiseModel, Odometer, PARTICLES_EVERY, Readings, Settings, start_estimator,
 };
 use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule, now_ns};
 use mole_types::{Role, env, topics};
 use std::process::ExitCode;
-
-/// Publish the particle set every this many steps: plenty for a picture or a viewer, and it
-/// keeps 256 KiB per step off the bus.
-const PARTICLES_EVERY: u64 = 10;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -68,30 +62,23 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?;
     let mut offer_out = peer.map(|_| p.peer_output(PEER_LANDMARKS)).transpose()?;
     let (mut fusion, mut solves) = (PeerFusion::new(args.peers.fuse_every), 0);
-    // The odometry pose of the step handled last (a replacement: of its predecessor's last).
-    let mut odom_before = pose_was.as_deref().map(|pose| pose.odom);
-    let tick_dt = std::cell::Cell::new(0.0);
-    let force_std = std::cell::Cell::new(0.0);
 
     p.run_tuned(
         tuning,
         |start| {
-            tick_dt.set(start.map.dt);
-            force_std.set(start.map.sensors.tactile_force_std);
             let (map, pose, landmarks) =
                 (start.map, pose_was.as_deref(), landmarks_were.as_deref());
             let estimator = start_estimator(kind, map, &settings, pose, landmarks)?;
-            Ok((estimator, Box::new(*map)))
+            // The odometry pose of the step handled last (a replacement: its predecessor's).
+            let odometer = Odometer::new(pose.map(|pose| pose.odom), map.dt);
+            Ok((estimator, Box::new(*map), odometer))
         },
-        |(estimator, _), step| {
-            let measured = step.trigger(odom);
-            let gap = step.ticks_since_last();
-            let odom = odometry_since(measured, odom_before, gap, tick_dt.get());
-            odom_before = Some([measured.x, measured.y, measured.theta]);
+        |(estimator, map, odometer), step| {
+            let odom = odometer.step(step.trigger(odom), step.ticks_since_last());
             let readings = Readings::of(&odom)
                 .with_beacons(step.get(beacons))
                 .with_fix(step.get(fix))
-                .with_contacts(step.get(tactile), force_std.get());
+                .with_contacts(step.get(tactile), map.sensors.tactile_force_std);
             let started = now_ns();
             estimator.step(&readings);
             let update_ns = now_ns().saturating_sub(started);
@@ -102,7 +89,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             pose_out.publish(k, origin, |pose| {
                 estimator.write_pose(pose);
                 pose.update_ns = update_ns;
-                pose.odom = odom_before.unwrap_or_default();
+                pose.odom = odometer.pose();
             })?;
             if kind == EstimatorKind::Pf && k % PARTICLES_EVERY == 0 {
                 particles_out.publish(k, origin, |out| _ = estimator.write_particles(out))?;
@@ -122,7 +109,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             Ok(())
         },
         // Only the noise changes while the estimator runs (the rest is fixed, docs/settings.md).
-        |(estimator, map), new| estimator.set_noise(&NoiseModel::from_map(&new.noise.assumed(map))),
+        |(e, map, _), new| e.set_noise(&NoiseModel::from_map(&new.noise.assumed(map))),
     )?;
     peer.inspect(|peer| fusion.log_totals(peer));
     Ok(())

@@ -6,7 +6,7 @@
 use clap::Parser;
 use mole_monitor::{Ending, Monitor, RunEnding, RunMeta};
 use mole_runtime::{CommonArgs, Flow, Process, now_ns};
-use mole_types::{EstimatorKind, Message, PlannerKind, Role, env, topics};
+use mole_types::{EstimatorKind, PlannerKind, Role, env, topics};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -67,11 +67,12 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             seen.drain(trajectory, |x| m.on_trajectory(x));
             seen.drain(plan, |x| m.on_plan_status(x));
             seen.drain(stats, |x| m.on_stats(x));
-            let last = tick(seen.latest(truth)).unwrap_or(0);
+            let last = seen.latest_tick(truth).unwrap_or(0);
+            let (p, g, c) = (pose, grid, contact);
             let outputs = [
-                tick(seen.latest(pose)),
-                tick(seen.latest(grid)),
-                tick(seen.latest(contact)),
+                seen.latest_tick(p),
+                seen.latest_tick(g),
+                seen.latest_tick(c),
             ];
             let finished = match ending.decide(last, &outputs, seen.shutdown()) {
                 Ending::Running => false,
@@ -96,9 +97,4 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             Ok(if finished { Flow::End } else { Flow::Continue })
         },
     )
-}
-
-/// The tick of a message, if there is one.
-fn tick<M: Message>(message: Option<&M>) -> Option<u64> {
-    message.map(|m| m.header().tick)
 }

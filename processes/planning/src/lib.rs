@@ -440,6 +440,19 @@ impl PlannerConfig {
     }
 }
 
+/// The planner `config` names, for the robot and sensors of `map`: refused, with the reason, when
+/// the world lacks a sensor it needs or the configuration cannot build it (a missing goal). Bad
+/// input for a process: running it again cannot help.
+pub fn build_planner_for(
+    config: &PlannerConfig,
+    map: &mole_types::WorldMap,
+) -> Result<Box<dyn Planner>, String> {
+    if let Some(why) = config.kind.refuses_sensors(&map.sensors, "this world") {
+        return Err(why);
+    }
+    build_planner(config, RobotLimits::from(&map.robot)).map_err(|e| e.to_string())
+}
+
 /// A planner the registry builds: one row of [`mole_types::planners!`] names its type.
 pub trait Registered: Planner + Sized + 'static {
     /// Built with `settings` for a robot with `limits`; `goal` is given to a planner that needs

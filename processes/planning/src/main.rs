@@ -8,7 +8,7 @@
 //! and counts what it ignored.
 
 use clap::Parser;
-use mole_planning::{Command, OperatorGoals, PlannerConfig, PlannerInput, RobotLimits, Settings};
+use mole_planning::{Command, OperatorGoals, PlannerConfig, PlannerInput, Settings};
 use mole_runtime::{BadInput, CommonArgs, Order, Process, Rule};
 use mole_types::{PlannerKind, Pose2, Role, env, topics};
 use std::process::ExitCode;
@@ -50,28 +50,16 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     p.run_tuned(
         tuning,
         |start| {
-            let map = start.map;
-            let (seed, local) = (start.seed, args.local_planner);
             let config = PlannerConfig {
-                seed,
-                local,
+                seed: start.seed,
+                local: args.local_planner,
                 settings,
                 ..PlannerConfig::new(args.planner)
             }
-            .with_world_goal(map, args.goal);
-            if let Some(why) = config.kind.refuses_sensors(&map.sensors, "this world") {
-                return Err(BadInput(why).into());
-            }
-            // A planner that cannot be built is bad input (exit 2), not a crash to retry.
-            let planner = mole_planning::build_planner(&config, RobotLimits::from(&map.robot))
-                .map_err(|e| BadInput(e.to_string()))?;
-            Ok((
-                planner,
-                config,
-                map.dt,
-                Command::STOP,
-                OperatorGoals::default(),
-            ))
+            .with_world_goal(start.map, args.goal);
+            let planner = mole_planning::build_planner_for(&config, start.map).map_err(BadInput)?;
+            let (dt, last_command) = (start.map.dt, Command::STOP);
+            Ok((planner, config, dt, last_command, OperatorGoals::default()))
         },
         |(planner, _, dt, last_command, goals), step| {
             if let Some(goal) = step.get(goal) {

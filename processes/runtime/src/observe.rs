@@ -27,6 +27,11 @@ impl Observation<'_> {
         self.process.input_mut(input).latest()
     }
 
+    /// The tick of the newest sample of `input` drained so far.
+    pub fn latest_tick<M: Message>(&mut self, input: In<M>) -> Option<u64> {
+        self.latest(input).map(|m| m.header().tick)
+    }
+
     /// Whether the observer's period has passed since the last periodic wake-up.
     pub fn periodic(&self) -> bool {
         self.periodic
