@@ -518,13 +518,26 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
             (shm_at_10, fds_at_10) = snapshot(cycle + 1, &mut pids);
         }
     }
-    let (shm_at_100, fds_at_100) = snapshot(101, &mut pids);
+    // A connection a live process opens lazily (on its next publish) may be a moment late on a
+    // loaded machine: the count is read again for up to 5 s. A leak of one file a cycle is 90
+    // files, which no wait hides.
+    let (mut shm_at_100, mut fds_at_100) = snapshot(101, &mut pids);
+    for _ in 0..5 {
+        if shm_at_100.len() <= shm_at_10.len() && fds_at_100 <= fds_at_10 {
+            break;
+        }
+        std::thread::sleep(Duration::from_secs(1));
+        (shm_at_100, fds_at_100) = snapshot(101, &mut pids);
+    }
+    let grown: Vec<&String> = shm_at_100
+        .iter()
+        .filter(|f| !shm_at_10.contains(f))
+        .collect();
     assert!(
         shm_at_100.len() <= shm_at_10.len(),
-        "shared-memory files grew from {} (cycle 10) to {} (cycle 100): {:?}",
+        "shared-memory files grew from {} (cycle 10) to {} (cycle 100); new since cycle 10: {grown:?}",
         shm_at_10.len(),
         shm_at_100.len(),
-        left_behind(&shm_at_10)
     );
     assert!(
         fds_at_100 <= fds_at_10,

@@ -14,7 +14,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use mole_types::link::{self, BRIDGE_ROLE, LinkError};
+use mole_types::graph::nodes::{self, BRIDGE};
+use mole_types::link::{self, LinkError};
 use mole_types::{ClockMode, EstimatorKind, PlannerKind, Role, UnknownChoice};
 use serde::Deserialize;
 use toml::Spanned;
@@ -385,13 +386,13 @@ pub fn parse_launch_file(text: &str, path: &Path) -> Result<LaunchFile, LaunchEr
         let role = p.role.get_ref();
         if let Err(e) = role.parse::<Role>()
             && !is_extra_observer(role)
-            && role != BRIDGE_ROLE
+            && role != nodes::BRIDGE
         {
             return Err(invalid(
                 Some(p.role.span()),
                 format!("process[{i}].role"),
                 format!(
-                    "{e}, or observer-<name> (an extra observer), or {BRIDGE_ROLE} (a split stack's link)"
+                    "{e}, or observer-<name> (an extra observer), or {BRIDGE} (a split stack's link)"
                 ),
             ));
         }
@@ -514,7 +515,7 @@ fn validate_bridge(
     processes: &[ProcessSpec],
     invalid: &impl Fn(Option<std::ops::Range<usize>>, String, String) -> LaunchError,
 ) -> Result<Option<BridgeTable>, LaunchError> {
-    let has_process = processes.iter().any(|p| p.role == BRIDGE_ROLE);
+    let has_process = processes.iter().any(|p| p.role == nodes::BRIDGE);
     let raw = match (raw, has_process) {
         (None, false) => return Ok(None),
         (None, true) => {
@@ -522,7 +523,7 @@ fn validate_bridge(
                 None,
                 "bridge".to_owned(),
                 format!(
-                    "a `{BRIDGE_ROLE}` process but no [bridge] table, expected [bridge] with peer_namespace, out, in, listen or connect"
+                    "a `{BRIDGE}` process but no [bridge] table, expected [bridge] with peer_namespace, out, in, listen or connect"
                 ),
             ));
         }
@@ -531,7 +532,7 @@ fn validate_bridge(
                 Some(raw.span()),
                 "bridge".to_owned(),
                 format!(
-                    "a [bridge] table but no process with role = \"{BRIDGE_ROLE}\", expected one (command = \"mole-bridge\")"
+                    "a [bridge] table but no process with role = \"{BRIDGE}\", expected one (command = \"mole-bridge\")"
                 ),
             ));
         }

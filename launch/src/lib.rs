@@ -19,7 +19,6 @@ pub mod hot_swap;
 pub mod inject;
 pub mod keeper;
 pub mod launch_file;
-pub mod names;
 pub mod param;
 pub mod record;
 pub mod replay;

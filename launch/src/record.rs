@@ -19,7 +19,7 @@ use std::time::Duration;
 /// The recorder's program, found next to `mole`, then on PATH.
 pub const RECORDER_PROGRAM: &str = "mole-recorder";
 /// The recorder's name in its log file and its supervisor.
-const RECORDER: &str = "recorder";
+const RECORDER: &str = mole_types::graph::nodes::RECORDER;
 
 #[derive(Debug, Clone, Args)]
 pub struct RecordArgs {

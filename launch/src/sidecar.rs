@@ -6,11 +6,11 @@
 //! record`, `mole view`) it runs until Ctrl-C or the stack ends.
 
 use crate::Failure;
-use crate::names::LAUNCHER_NODE;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::{ChildSpec, ExitStatus, RestartPolicy, Supervisor, SupervisorEvent, resolve_program};
 use mole_runtime::{cleanup_dead_nodes, live_nodes_in_namespace, stack_clock_mode};
 use mole_types::ClockMode;
+use mole_types::graph::nodes::LAUNCHER;
 use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::sync::Arc;
@@ -218,6 +218,6 @@ impl Attached {
 
 /// Whether the launcher of the stack in `namespace` is alive.
 fn stack_runs(namespace: &str) -> bool {
-    let launcher = format!("mole/{namespace}/{LAUNCHER_NODE}");
+    let launcher = format!("mole/{namespace}/{LAUNCHER}");
     live_nodes_in_namespace(namespace).contains(&launcher)
 }

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 /// The player's program, found next to `mole`, then on PATH.
 pub const PLAYER_PROGRAM: &str = "mole-player";
 /// The player's role in the launch plan, its log file and its statistics.
-pub const PLAYER: &str = "player";
+pub const PLAYER: &str = mole_types::graph::nodes::PLAYER;
 /// The player in the place of the replayed roles: what `mole up` starts instead of them.
 #[derive(Debug, Clone)]
 pub struct StandIn {

@@ -1,10 +1,11 @@
 //! `mole top`: a live view of a running stack (topics, processes), refreshed every second.
 
 use crate::Failure;
-use crate::names::{LAUNCHER_NODE, TOP_ROLE};
 use crate::stats::StatsCollector;
 use clap::Args;
 use mole_runtime::{ClockMode, CommonArgs, Context, Subscriber, live_nodes_in_namespace};
+use mole_types::graph::nodes;
+use mole_types::graph::nodes::TOP;
 use mole_types::{
     GRAPH, PROCESS_EXITED, PROCESS_FAILED, PROCESS_RESTARTING, PROCESS_RUNNING, Processes,
     RunStatus, Stats, read_name, topics,
@@ -46,7 +47,7 @@ fn open(namespace: &str, shutdown: Arc<AtomicBool>) -> Result<(Context, Ports), 
     let mut last_error = String::new();
     for mode in [ClockMode::Realtime, ClockMode::Lockstep] {
         let args = CommonArgs::attach(namespace, mode);
-        let ctx = Context::with_shutdown_flag(TOP_ROLE, &args, shutdown.clone())
+        let ctx = Context::with_shutdown_flag(nodes::TOP, &args, shutdown.clone())
             .map_err(|e| Failure::run(e.to_string()))?;
         let ports = (|| {
             Ok::<_, mole_runtime::RuntimeError>(Ports {
@@ -122,7 +123,7 @@ fn listed_roles(
 ) -> Vec<String> {
     let mut roles: Vec<String> = GRAPH.iter().map(|r| r.role.name().to_owned()).collect();
     for role in supervised.into_iter().chain(heard) {
-        if !roles.contains(&role) && role != LAUNCHER_NODE && role != TOP_ROLE {
+        if !roles.contains(&role) && role != nodes::LAUNCHER && role != nodes::TOP {
             roles.push(role);
         }
     }
@@ -143,7 +144,7 @@ fn state_name(state: u32) -> &'static str {
 pub fn top(args: &TopArgs) -> Result<(), Failure> {
     let live: Vec<String> = live_nodes_in_namespace(&args.namespace)
         .into_iter()
-        .filter(|n| !n.ends_with(&format!("/{TOP_ROLE}")))
+        .filter(|n| !n.ends_with(&format!("/{TOP}")))
         .collect();
     if live.is_empty() {
         return Err(Failure::input(format!(
@@ -292,10 +293,10 @@ mod tests {
     /// processes follow; the launcher and `mole top` do not.
     #[test]
     fn the_process_table_lists_the_graph_first() {
-        let extra = "recorder".to_owned();
+        let extra = mole_types::graph::nodes::RECORDER.to_owned();
         let roles = listed_roles(
             [GRAPH[2].role.name().to_owned(), extra.clone()],
-            [LAUNCHER_NODE.to_owned(), TOP_ROLE.to_owned()],
+            [nodes::LAUNCHER.to_owned(), nodes::TOP.to_owned()],
         );
         let graph: Vec<String> = GRAPH.iter().map(|r| r.role.name().to_owned()).collect();
         assert_eq!(roles[..GRAPH.len()], graph[..]);

@@ -13,7 +13,6 @@ use crate::Failure;
 use crate::hot_swap::{SwapEnv, SwapError, SwapReport, check_swappable, hot_swap};
 use crate::inject::Injector;
 use crate::keeper::ResumeKeeper;
-use crate::names::LAUNCHER_NODE;
 use crate::param::Tuner;
 use crate::record::{RecordPlan, Recorder};
 use crate::stats::StatsCollector;
@@ -30,6 +29,7 @@ use finish::*;
 use indicatif::{ProgressBar, ProgressStyle};
 use mole_monitor::{Summary, SwapRecord, read_summary, write_summary};
 use mole_runtime::{CommonArgs, Context, ControlServer, Publisher, Subscriber, cleanup_dead_nodes};
+use mole_types::graph::nodes;
 use mole_types::{
     CONTROL_FAILED, CONTROL_FAULT, CONTROL_OK, CONTROL_PARAM, CONTROL_REFUSED, CONTROL_STATUS,
     CONTROL_STOP, ClockMode, ControlRequest, EndReason, EstimatorKind, FaultSpec, PlannerKind,

@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// The view's name in its log file and its supervisor.
-const VIEW: &str = "view";
+const VIEW: &str = mole_types::graph::nodes::VIEW;
 /// Beside `mole up` a view that died is started again (the page reconnects by itself), on the
 /// same port; after five restarts the run goes on without it.
 const RESTART: RestartPolicy = RestartPolicy {

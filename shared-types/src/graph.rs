@@ -26,6 +26,23 @@ choice! {
     }
 }
 
+/// The node names of the stack's processes that are not roles of the graph: they take no part
+/// in a step, but logs, statistics, `mole top` and the launcher name them.
+pub mod nodes {
+    /// `mole up` itself.
+    pub const LAUNCHER: &str = "launcher";
+    /// `mole top`: it does not count as a stack in the namespace.
+    pub const TOP: &str = "top";
+    /// `mole-recorder`, started by `mole up --record` or `mole record`.
+    pub const RECORDER: &str = "recorder";
+    /// `mole-player`, in the place of the roles `mole replay` plays back.
+    pub const PLAYER: &str = "player";
+    /// `mole-view`, started by `mole up --view` or `mole view`.
+    pub const VIEW: &str = "view";
+    /// `mole-bridge`: one in each half of a split stack.
+    pub const BRIDGE: &str = "bridge";
+}
+
 /// Whether `mole swap` may replace a role while the stack runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Swap {

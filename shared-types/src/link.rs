@@ -5,9 +5,6 @@
 use crate::topics;
 use core::time::Duration;
 
-/// The bridge's role: a process of each half of a split stack, outside the graph.
-pub const BRIDGE_ROLE: &str = "bridge";
-
 /// How long a bridge waits for its peer's bridge when it starts; then it ends (exit 2) saying
 /// what it saw on the link. Both halves' bridges wait the same, so a mismatched pair ends on
 /// both sides.

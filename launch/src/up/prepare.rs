@@ -9,7 +9,7 @@ use crate::{
     parse_swap, resolve_program,
 };
 use mole_runtime::live_nodes_in_namespace;
-use mole_types::link::BRIDGE_ROLE;
+use mole_types::graph::nodes;
 use mole_types::{ClockMode, PlannerKind, env};
 use mole_world::Scenario;
 use std::collections::BTreeMap;
@@ -107,7 +107,11 @@ fn give_the_bridge_its_settings(launch: &mut LaunchFile) -> Result<(), Failure> 
         None => None,
     };
     let args = bridge.args(tls.as_ref());
-    if let Some(process) = launch.processes.iter_mut().find(|p| p.role == BRIDGE_ROLE) {
+    if let Some(process) = launch
+        .processes
+        .iter_mut()
+        .find(|p| p.role == nodes::BRIDGE)
+    {
         process.args.extend(args);
     }
     Ok(())
@@ -229,7 +233,7 @@ fn default_launch_file() -> PathBuf {
 fn refuse_namespace_in_use(namespace: &str) -> Result<(), Failure> {
     let live: Vec<String> = live_nodes_in_namespace(namespace)
         .into_iter()
-        .filter(|n| !n.ends_with(&format!("/{}", crate::names::TOP_ROLE)))
+        .filter(|n| !n.ends_with(&format!("/{}", mole_types::graph::nodes::TOP)))
         .collect();
     if live.is_empty() {
         return Ok(());

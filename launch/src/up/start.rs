@@ -27,10 +27,10 @@ pub(super) fn start(
     )
     .map_err(|e| Failure::run(format!("cannot open stack/params: {e}")))?;
     let recorder = recording
-        .map(|r| r.start(&plan.env, log_of(args, "recorder")))
+        .map(|r| r.start(&plan.env, log_of(args, nodes::RECORDER)))
         .transpose()?;
     let view = viewing
-        .map(|v| v.start(&plan.env, log_of(args, "view")))
+        .map(|v| v.start(&plan.env, log_of(args, nodes::VIEW)))
         .transpose()?;
     let order = start_order(&plan.launch.processes).map_err(|e| Failure::input(e.to_string()))?;
     let mut stack = Stack {
@@ -102,7 +102,7 @@ pub(super) fn open_ports(
 ) -> Result<Ports, String> {
     // The one sweep before the processes start (they do not sweep, see `Context::new`).
     cleanup_dead_nodes();
-    let ctx = Context::with_shutdown_flag(LAUNCHER_NODE, common, interrupted)
+    let ctx = Context::with_shutdown_flag(nodes::LAUNCHER, common, interrupted)
         .map_err(|e| e.to_string())?;
     let open = || -> Result<_, mole_runtime::RuntimeError> {
         Ok((
@@ -128,7 +128,7 @@ pub(super) fn open_ports(
 pub(super) fn wait_ready(stack: &mut Stack<'_>, role: &str) -> Result<(), Failure> {
     // A bridge waits up to PEER_TIMEOUT for the other half, then ends saying why: its reason,
     // not this timeout, is the news.
-    let timeout = if role == mole_types::link::BRIDGE_ROLE {
+    let timeout = if role == nodes::BRIDGE {
         mole_types::link::PEER_TIMEOUT + READY_TIMEOUT
     } else {
         READY_TIMEOUT

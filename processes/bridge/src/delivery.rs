@@ -9,6 +9,7 @@
 
 use mole_runtime::ClockMode;
 use mole_types::topics;
+use zenoh::qos::{CongestionControl, Priority};
 
 /// Realtime topics that may drop to the newest: large, and superseded by the next step's.
 pub const BULK: [&str; 5] = [
@@ -39,6 +40,18 @@ pub fn delivery(topic: &str, mode: ClockMode) -> Delivery {
         _ => Delivery::Reliable {
             urgent: topic == topics::PLANNING_CMD.name,
         },
+    }
+}
+
+/// zenoh's congestion control, priority and express flag for a delivery.
+#[must_use]
+pub fn qos(delivery: Delivery) -> (CongestionControl, Priority, bool) {
+    match delivery {
+        Delivery::Reliable { urgent: true } => {
+            (CongestionControl::Block, Priority::InteractiveHigh, true)
+        }
+        Delivery::Reliable { urgent: false } => (CongestionControl::Block, Priority::Data, true),
+        Delivery::Newest => (CongestionControl::Drop, Priority::DataLow, false),
     }
 }
 

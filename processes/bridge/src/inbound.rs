@@ -5,9 +5,20 @@
 //! sentence as two processes on one machine. A topic with history is also fetched from the peer
 //! when the link comes up (a host that joins late gets `world/map`); such a reply may repeat or
 //! trail what already came live, and is forwarded only when it is newer.
+//!
+//! [`Ins`] are the bridge's topics in: a zenoh subscriber on `mole/<peer>/<topic>` each, whose
+//! samples join one inbox in arrival order (zenoh's thread rings the bridge's doorbell) and are
+//! published here once [`Forwarding`] lets them.
 
-use mole_runtime::PayloadLayout;
-use mole_types::{Header, Message};
+use crate::{BridgeSpec, Delivery, Entry, Failed, Inbox, delivery, key_expr};
+use mole_runtime::{BadInput, Context, PayloadLayout, Publisher, Ringer, layout_mismatch};
+use mole_types::topics::{self, TopicVisitor};
+use mole_types::{Header, Message, Topic};
+use std::sync::Arc;
+use std::time::Duration;
+use zenoh::Wait;
+use zenoh::bytes::ZBytes;
+use zenoh::sample::Sample;
 
 /// The layout a sample carries and is checked against, as the runtime names layouts in its
 /// errors: `` `mole.Scan.v1` (4144 bytes, aligned to 8) ``.
@@ -89,6 +100,212 @@ impl Forwarding {
         };
         self.last = Some(this);
         Forward::Publish { lost }
+    }
+}
+
+/// What zenoh's threads leave for the bridge's: samples from the peer, in arrival order.
+pub type PeerInbox = Inbox<Sample>;
+
+/// Every topic from the peer, the inbox their samples wait in, and the peer's namespace.
+pub struct Ins {
+    ins: Vec<Box<dyn In>>,
+    inbox: Arc<PeerInbox>,
+    peer: String,
+}
+
+impl Ins {
+    /// Opens every topic of `spec.inbound`: a zenoh subscriber into the inbox, whose every
+    /// sample rings `ringer`, and a publisher here.
+    pub fn open(
+        ctx: &Context,
+        session: &zenoh::Session,
+        spec: &BridgeSpec,
+        ringer: &Ringer,
+    ) -> Result<Ins, Failed> {
+        let wake = ringer.clone();
+        let inbox = Arc::new(PeerInbox::new(move || wake.ring()));
+        let ins = open_ins(ctx, session, spec, &inbox)?;
+        Ok(Ins {
+            ins,
+            inbox,
+            peer: spec.peer_namespace.clone(),
+        })
+    }
+
+    /// Asks the peer for the newest sample of every topic in that keeps history; the replies
+    /// join the inbox and are forwarded only where they are news.
+    pub fn ask_history(&self, session: &zenoh::Session) {
+        ask_history(session, &self.peer, &self.ins, &self.inbox);
+    }
+
+    /// Publishes here every sample waiting in the inbox, in arrival order, that [`Forwarding`]
+    /// lets through; a layout mismatch ends the bridge.
+    pub fn forward_waiting(&mut self) -> Result<(), BadInput> {
+        while let Some(entry) = self.inbox.pop() {
+            self.ins[entry.topic].forward(&entry.item, entry.history)?;
+        }
+        Ok(())
+    }
+}
+
+/// A topic from the peer, whatever its message type.
+trait In {
+    /// Publishes `sample` here if [`Forwarding`] says so; a layout mismatch ends the bridge.
+    fn forward(&mut self, sample: &Sample, history: bool) -> Result<(), BadInput>;
+    /// Its key on the peer's side, if it keeps history.
+    fn history_key(&self) -> Option<&str>;
+}
+
+struct TypedIn<M: Message> {
+    publisher: Publisher<M>,
+    forwarding: Forwarding,
+    peer_key: String,
+    history: bool,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    malformed: u64,
+}
+
+impl<M: Message> In for TypedIn<M> {
+    fn forward(&mut self, sample: &Sample, history: bool) -> Result<(), BadInput> {
+        let payload = sample.payload().to_bytes();
+        let attachment = sample.attachment().map(ZBytes::to_bytes);
+        match self
+            .forwarding
+            .judge(attachment.as_deref(), &payload, history)
+        {
+            Forward::Publish { lost } => {
+                if lost > 0 {
+                    self.publisher.count_lost(lost);
+                }
+                let header: Header =
+                    bytemuck::pod_read_unaligned(&payload[..core::mem::size_of::<Header>()]);
+                let published = self.publisher.publish(header.tick, header.origin_ns, |m| {
+                    bytemuck::bytes_of_mut(m).copy_from_slice(&payload);
+                });
+                if let Err(e) = published {
+                    tracing::warn!(topic = self.publisher.topic(), "{e}");
+                }
+            }
+            Forward::Duplicate | Forward::Stale => {}
+            Forward::Malformed { len } => {
+                self.publisher.count_invalid();
+                self.malformed += 1;
+                if self.malformed.is_power_of_two() {
+                    tracing::warn!(
+                        topic = self.publisher.topic(),
+                        len,
+                        dropped = self.malformed,
+                        "dropped a sample from the peer that is not one whole message"
+                    );
+                }
+            }
+            Forward::Mismatch { found } => {
+                return Err(BadInput(format!(
+                    "cannot open topic `{}` from the peer's bridge ({}): {}",
+                    self.publisher.topic(),
+                    self.peer_key,
+                    layout_mismatch(&PayloadLayout::of::<M>(), &found)
+                )));
+            }
+        }
+        Ok(())
+    }
+    fn history_key(&self) -> Option<&str> {
+        self.history.then_some(self.peer_key.as_str())
+    }
+}
+
+fn open_ins(
+    ctx: &Context,
+    session: &zenoh::Session,
+    spec: &BridgeSpec,
+    inbox: &Arc<PeerInbox>,
+) -> Result<Vec<Box<dyn In>>, Failed> {
+    struct Open<'a> {
+        ctx: &'a Context,
+        session: &'a zenoh::Session,
+        spec: &'a BridgeSpec,
+        inbox: &'a Arc<PeerInbox>,
+        ins: Vec<Box<dyn In>>,
+        error: Option<Failed>,
+    }
+    impl Open<'_> {
+        fn open<M: Message>(&self, topic: Topic<M>) -> Result<Box<dyn In>, Failed> {
+            let peer_key = key_expr(&self.spec.peer_namespace, topic.name);
+            let newest_only = delivery(topic.name, self.ctx.mode()) == Delivery::Newest;
+            let (inbox, index) = (self.inbox.clone(), self.ins.len());
+            let subscriber = self
+                .session
+                .declare_subscriber(peer_key.clone())
+                .callback(move |sample| {
+                    let entry = Entry {
+                        topic: index,
+                        item: sample,
+                        history: false,
+                    };
+                    inbox.push(entry, newest_only);
+                })
+                .wait()?;
+            Ok(Box::new(TypedIn {
+                publisher: self.ctx.publisher(topic)?,
+                forwarding: Forwarding::new::<M>(),
+                peer_key,
+                history: topic.history > 0,
+                _subscriber: subscriber,
+                malformed: 0,
+            }))
+        }
+    }
+    impl TopicVisitor for Open<'_> {
+        fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
+            if self.error.is_none() && self.spec.inbound.contains(&topic.name) {
+                match self.open(topic) {
+                    Ok(input) => self.ins.push(input),
+                    Err(e) => self.error = Some(e),
+                }
+            }
+        }
+    }
+    let mut open = Open {
+        ctx,
+        session,
+        spec,
+        inbox,
+        ins: Vec::new(),
+        error: None,
+    };
+    topics::for_each(&mut open);
+    match open.error {
+        Some(e) => Err(e),
+        None => Ok(open.ins),
+    }
+}
+
+/// Asks the peer for the newest sample of every topic in that keeps history; the replies join
+/// the inbox and are forwarded only where they are news.
+fn ask_history(session: &zenoh::Session, peer: &str, ins: &[Box<dyn In>], inbox: &Arc<PeerInbox>) {
+    for (index, input) in ins.iter().enumerate() {
+        let Some(key) = input.history_key() else {
+            continue;
+        };
+        let inbox = inbox.clone();
+        let asked = session
+            .get(key)
+            .timeout(Duration::from_secs(2))
+            .callback(move |reply| {
+                if let Ok(sample) = reply.result() {
+                    let entry = Entry {
+                        topic: index,
+                        item: sample.clone(),
+                        history: true,
+                    };
+                    inbox.push(entry, false);
+                }
+            })
+            .wait();
+        if let Err(e) = asked {
+            tracing::warn!(peer, key, "cannot ask for history: {e}");
+        }
     }
 }
 

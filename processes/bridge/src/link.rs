@@ -5,10 +5,19 @@
 //! expected peer is there, that is the bridge of `peer_namespace` that expects this namespace in
 //! turn; any other bridge's token is a stranger, reported with both namespaces, so two halves
 //! started with namespaces that do not match say so instead of waiting for each other.
+//!
+//! [`Link`] is that watch on a zenoh session: the bridges' liveliness tokens, this bridge's own
+//! among them.
 
-use crate::key_expr;
-use mole_types::link::{BRIDGE_ROLE, PEER_TIMEOUT};
+use crate::{BridgeSpec, Failed, key_expr};
+use mole_runtime::{BadInput, Context, Ringer};
+use mole_types::graph::nodes::BRIDGE;
+use mole_types::link::PEER_TIMEOUT;
 use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+use zenoh::sample::SampleKind;
 
 /// One bridge on the link: its namespace and the namespace it expects its peer in.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
@@ -21,13 +30,13 @@ impl LinkToken {
     /// Its liveliness token's key: `mole/<namespace>/bridge/<peer>`.
     #[must_use]
     pub fn key(&self) -> String {
-        key_expr(&self.namespace, &format!("{BRIDGE_ROLE}/{}", self.peer))
+        key_expr(&self.namespace, &format!("{BRIDGE}/{}", self.peer))
     }
 
     /// The token of the key `key`, if it is a bridge's.
     #[must_use]
     pub fn parse(key: &str) -> Option<LinkToken> {
-        let (head, peer) = key.split_once(&format!("/{BRIDGE_ROLE}/"))?;
+        let (head, peer) = key.split_once(&format!("/{BRIDGE}/"))?;
         let (_, namespace) = head.split_once('/')?;
         let token = LinkToken {
             namespace: namespace.to_owned(),
@@ -50,7 +59,7 @@ impl core::fmt::Display for LinkToken {
 /// The key expression of every bridge's token, whatever its namespaces.
 #[must_use]
 pub fn every_link_token() -> String {
-    key_expr("**", &format!("{BRIDGE_ROLE}/**"))
+    key_expr("**", &format!("{BRIDGE}/**"))
 }
 
 /// What a token's coming or going changed.
@@ -188,6 +197,108 @@ impl LinkWatch {
             self.me,
             self.expected()
         )
+    }
+}
+
+/// The bridges' liveliness tokens, watched ([`LinkWatch`]): the peer's arrivals and departures
+/// are reported, and any other bridge on the link with both namespaces.
+pub struct Link {
+    state: Arc<Mutex<LinkWatch>>,
+    _watch: zenoh::pubsub::Subscriber<()>,
+}
+
+impl Link {
+    /// Watches every bridge's token on `session`; each change rings `ringer`.
+    pub fn watch(
+        session: &zenoh::Session,
+        spec: &BridgeSpec,
+        ringer: &Ringer,
+    ) -> Result<Link, Failed> {
+        let state = Arc::new(Mutex::new(LinkWatch::new(
+            &spec.namespace,
+            &spec.peer_namespace,
+        )));
+        let (seen, ringer, peer) = (state.clone(), ringer.clone(), spec.peer_namespace.clone());
+        let watch = session
+            .liveliness()
+            .declare_subscriber(every_link_token())
+            .history(true)
+            .callback(move |sample| {
+                let mut state = seen.lock().unwrap_or_else(|e| e.into_inner());
+                let alive = sample.kind() == SampleKind::Put;
+                match state.saw(sample.key_expr().as_str(), alive) {
+                    LinkChange::Up => tracing::info!(peer, "link up: the peer's bridge is there"),
+                    LinkChange::Down { losses } => tracing::warn!(
+                        peer,
+                        losses,
+                        "link down: the peer's bridge is gone; its topics stop here until it is back"
+                    ),
+                    LinkChange::Stranger(stranger) => {
+                        tracing::warn!("{}", state.stranger_warning(&stranger));
+                    }
+                    LinkChange::Nothing => {}
+                }
+                drop(state);
+                ringer.ring();
+            })
+            .wait()?;
+        Ok(Link {
+            state,
+            _watch: watch,
+        })
+    }
+
+    fn state(&self) -> std::sync::MutexGuard<'_, LinkWatch> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// This bridge's own token's key.
+    #[must_use]
+    pub fn own_key(&self) -> String {
+        self.state().own().key()
+    }
+
+    /// Declares this bridge's own token on `session`: the peer sees it while it lives.
+    pub fn declare_token(
+        &self,
+        session: &zenoh::Session,
+    ) -> Result<zenoh::liveliness::LivelinessToken, Failed> {
+        session.liveliness().declare_token(self.own_key()).wait()
+    }
+
+    /// Says what it waits for, then waits until the peer's bridge is there; false on a
+    /// shutdown, an error (the launch files' namespaces or endpoints do not meet: exit 2) saying
+    /// what is on the link if the peer is not there within [`PEER_TIMEOUT`].
+    pub fn wait_for_peer(&self, ctx: &Context, spec: &BridgeSpec) -> Result<bool, BadInput> {
+        tracing::info!(
+            peer = %spec.peer_namespace,
+            listen = ?spec.listen.iter().map(|e| e.as_str()).collect::<Vec<_>>(),
+            connect = ?spec.connect.iter().map(|e| e.as_str()).collect::<Vec<_>>(),
+            out = ?spec.out, inbound = ?spec.inbound,
+            "waiting for the peer's bridge"
+        );
+        let started = Instant::now();
+        let mut said = Instant::now();
+        while !self.state().is_up() {
+            if ctx.shutdown_requested() {
+                return Ok(false);
+            }
+            if started.elapsed() > PEER_TIMEOUT {
+                return Err(BadInput(self.state().gave_up(&spec.whereabouts())));
+            }
+            if said.elapsed() > Duration::from_secs(5) {
+                tracing::info!("still waiting for the peer's bridge");
+                said = Instant::now();
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        self.came_back();
+        Ok(true)
+    }
+
+    /// Whether the peer came back since the last call.
+    pub fn came_back(&self) -> bool {
+        self.state().came_back()
     }
 }
 

@@ -6,6 +6,18 @@
 //! would break it (a topic looked at before its sample came, the next one after, or a topic's
 //! backlog sent before an older sample of the next topic), so the samples are gathered until a
 //! pass over every topic finds nothing new, and sent by their publication stamps.
+//!
+//! [`Outs`] are the bridge's topics out: an iceoryx2 subscriber here (it wakes the bridge) and a
+//! zenoh publisher on `mole/<ns>/<topic>` each, the message's layout attached to every sample; a
+//! topic with history also answers the peer's queries with its newest sample.
+
+use crate::{BridgeSpec, Failed, delivery, descriptor, key_expr, qos};
+use mole_runtime::{Context, Subscriber, Waker};
+use mole_types::topics::{self, TopicVisitor};
+use mole_types::{Message, Topic};
+use std::sync::{Arc, Mutex};
+use zenoh::Wait;
+use zenoh::bytes::ZBytes;
 
 /// A sample taken from a topic here, waiting to be sent in publication order.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -47,6 +59,175 @@ pub fn send_in_order<O: Outbound + ?Sized>(
     staged.sort_by_key(|s| s.stamp_ns);
     for sample in staged.drain(..) {
         outs[sample.topic].send(sample.bytes);
+    }
+}
+
+/// Every topic sent to the peer, and the buffer its samples wait in to leave in order.
+pub struct Outs {
+    outs: Vec<Box<dyn Out>>,
+    staged: Vec<Staged<ZBytes>>,
+}
+
+impl Outs {
+    /// Opens every topic of `spec.out`: a subscriber here, a zenoh publisher (and, for a topic
+    /// with history, a queryable) on the session.
+    pub fn open(
+        ctx: &Context,
+        session: &zenoh::Session,
+        spec: &BridgeSpec,
+    ) -> Result<Outs, Failed> {
+        let outs = open_outs(ctx, session, spec)?;
+        let staged = Vec::with_capacity(4 * outs.len());
+        Ok(Outs { outs, staged })
+    }
+
+    /// The wakers of the topics sent: a sample of any wakes the bridge.
+    #[must_use]
+    pub fn wakers(&self) -> Vec<Waker> {
+        self.outs.iter().map(|o| o.waker()).collect()
+    }
+
+    /// Sends every new sample of every topic, in the order they were published here
+    /// ([`send_in_order`]).
+    pub fn send_in_order(&mut self) {
+        send_in_order(&mut self.outs, &mut self.staged);
+    }
+}
+
+/// A topic sent to the peer, whatever its message type: it wakes the bridge, and its samples
+/// leave in publication order ([`send_in_order`]).
+trait Out: Outbound<Bytes = ZBytes> {
+    fn waker(&self) -> Waker;
+}
+
+struct TypedOut<M: Message> {
+    subscriber: Subscriber<M>,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    /// The message's layout, attached to every sample.
+    layout: ZBytes,
+    /// The newest sample, which the queryable hands a peer that asks (topics with history).
+    newest: Option<Arc<Mutex<Option<ZBytes>>>>,
+    _queryable: Option<zenoh::query::Queryable<()>>,
+    failed_sends: u64,
+}
+
+impl<M: Message> Out for TypedOut<M> {
+    fn waker(&self) -> Waker {
+        self.subscriber.waker()
+    }
+}
+
+impl<M: Message> Outbound for TypedOut<M> {
+    type Bytes = ZBytes;
+    fn collect(&mut self, topic: usize, staged: &mut Vec<Staged<ZBytes>>) {
+        self.subscriber.drain(|message| {
+            staged.push(Staged {
+                stamp_ns: message.header().stamp_ns,
+                topic,
+                // The one copy: the network needs bytes of its own.
+                bytes: ZBytes::from(bytemuck::bytes_of(message).to_vec()),
+            });
+        });
+    }
+    fn send(&mut self, bytes: ZBytes) {
+        if let Some(newest) = &self.newest {
+            *newest.lock().unwrap_or_else(|e| e.into_inner()) = Some(bytes.clone());
+        }
+        if let Err(e) = self
+            .publisher
+            .put(bytes)
+            .attachment(self.layout.clone())
+            .wait()
+        {
+            self.failed_sends += 1;
+            if self.failed_sends.is_power_of_two() {
+                tracing::warn!(
+                    key = self.publisher.key_expr().as_str(),
+                    sends = self.failed_sends,
+                    "send failed: {e}"
+                );
+            }
+        }
+    }
+}
+
+fn open_outs(
+    ctx: &Context,
+    session: &zenoh::Session,
+    spec: &BridgeSpec,
+) -> Result<Vec<Box<dyn Out>>, Failed> {
+    struct Open<'a> {
+        ctx: &'a Context,
+        session: &'a zenoh::Session,
+        spec: &'a BridgeSpec,
+        outs: Vec<Box<dyn Out>>,
+        error: Option<Failed>,
+    }
+    impl Open<'_> {
+        fn open<M: Message>(&self, topic: Topic<M>) -> Result<Box<dyn Out>, Failed> {
+            let key = key_expr(&self.spec.namespace, topic.name);
+            let (congestion, priority, express) = qos(delivery(topic.name, self.ctx.mode()));
+            let publisher = self
+                .session
+                .declare_publisher(key.clone())
+                .congestion_control(congestion)
+                .priority(priority)
+                .express(express)
+                .wait()?;
+            let layout = ZBytes::from(descriptor::<M>());
+            let (newest, queryable) = if topic.history > 0 {
+                let newest: Arc<Mutex<Option<ZBytes>>> = Arc::default();
+                let (held, attached, reply_key) = (newest.clone(), layout.clone(), key.clone());
+                let queryable = self
+                    .session
+                    .declare_queryable(key)
+                    .callback(move |query| {
+                        let sample = held.lock().unwrap_or_else(|e| e.into_inner()).clone();
+                        if let Some(sample) = sample
+                            && let Err(e) = query
+                                .reply(reply_key.clone(), sample)
+                                .attachment(attached.clone())
+                                .wait()
+                        {
+                            tracing::warn!(key = %reply_key, "history reply failed: {e}");
+                        }
+                    })
+                    .wait()?;
+                (Some(newest), Some(queryable))
+            } else {
+                (None, None)
+            };
+            Ok(Box::new(TypedOut {
+                subscriber: self.ctx.subscriber(topic)?,
+                publisher,
+                layout,
+                newest,
+                _queryable: queryable,
+                failed_sends: 0,
+            }))
+        }
+    }
+    impl TopicVisitor for Open<'_> {
+        fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
+            if self.error.is_none() && self.spec.out.contains(&topic.name) {
+                match self.open(topic) {
+                    Ok(out) => self.outs.push(out),
+                    Err(e) => self.error = Some(e),
+                }
+            }
+        }
+    }
+    let mut open = Open {
+        ctx,
+        session,
+        spec,
+        outs: Vec::new(),
+        error: None,
+    };
+    topics::for_each(&mut open);
+    match open.error {
+        Some(e) => Err(e),
+        None => Ok(open.outs),
     }
 }
 

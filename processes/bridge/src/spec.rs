@@ -2,6 +2,7 @@
 //! zenoh endpoints, TLS; checked by the rules of [`mole_types::link`], which the launcher applies
 //! to a launch file's `[bridge]` table too.
 
+use mole_runtime::BadInput;
 use mole_types::link::{self, Endpoint, LinkError};
 use mole_types::topics;
 use std::path::PathBuf;
@@ -24,6 +25,47 @@ pub struct Tls {
     pub root_ca: PathBuf,
     pub cert: PathBuf,
     pub key: PathBuf,
+}
+
+/// The checked settings of the command line: this stack's `namespace`, the peer's, the topics
+/// `[out, in]`, the endpoints `[listen, connect]` and the TLS files `[root CA, certificate, key]`
+/// (all three or none); a bad one is the launch file's (exit 2).
+pub fn spec_of(
+    namespace: &str,
+    peer_namespace: &str,
+    [out, inbound]: [&[String]; 2],
+    [listen, connect]: [&[String]; 2],
+    tls: [&Option<PathBuf>; 3],
+) -> Result<BridgeSpec, BadInput> {
+    let tls = match tls {
+        [Some(root_ca), Some(cert), Some(key)] => {
+            for (what, path) in [
+                ("--tls-root-ca", root_ca),
+                ("--tls-cert", cert),
+                ("--tls-key", key),
+            ] {
+                if !path.is_file() {
+                    return Err(BadInput(format!("{what} {}: no such file", path.display())));
+                }
+            }
+            Some(Tls {
+                root_ca: root_ca.clone(),
+                cert: cert.clone(),
+                key: key.clone(),
+            })
+        }
+        _ => None,
+    };
+    BridgeSpec::new(
+        namespace,
+        peer_namespace,
+        out,
+        inbound,
+        listen,
+        connect,
+        tls,
+    )
+    .map_err(|e| BadInput(format!("bridge: {e}")))
 }
 
 /// A checked bridge.

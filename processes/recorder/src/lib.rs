@@ -7,8 +7,9 @@
 //! recording read back for playback ([`tape`]), a recording exported with Foxglove's
 //! well-known schemas ([`foxglove`]), who plays what in a replay ([`cast`]) and a
 //! replay checked against it ([`check`]). The `mole-recorder` binary (src/main.rs) reads the
-//! stack's topics and feeds these; the `mole-player` binary (src/bin/mole-player.rs) publishes a
-//! recording's roles into a live stack.
+//! stack's topics ([`taps`]) in its loop ([`reading`]) and hands them to the file's writer thread
+//! ([`writer`]); the `mole-player` binary (src/bin/mole-player.rs) publishes a recording's roles
+//! into a live stack ([`player`]).
 
 pub mod cast;
 pub mod check;
@@ -19,8 +20,12 @@ pub mod foxglove;
 pub mod gaps;
 pub mod info;
 pub mod metadata;
+pub mod player;
+pub mod reading;
 pub mod schema;
 pub mod tape;
+pub mod taps;
+pub mod writer;
 
 pub use cast::Cast;
 pub use check::{Compared, Difference, compare};
@@ -30,6 +35,9 @@ pub use file::{RECORDING_METADATA, RUN_METADATA, Record, RecordError, Recording,
 pub use foxglove::{ExportError, Exported, export};
 pub use gaps::Gaps;
 pub use info::{Info, InfoError, read_info};
-pub use metadata::{RunFacts, run_metadata, source_revision};
+pub use metadata::{RunFacts, run_metadata, run_metadata_of, source_revision};
+pub use reading::{Reading, read_until_shutdown};
 pub use schema::{MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json};
 pub use tape::{Sample, Tape, TapeError, Window, read_tape};
+pub use taps::Taps;
+pub use writer::WriterThread;

@@ -1,6 +1,8 @@
 //! The run's metadata record ([`crate::RUN_METADATA`]): what a reader needs to know what was
 //! run, and to run it again.
 
+use crate::Every;
+use mole_runtime::{BadInput, CommonArgs};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
@@ -41,7 +43,7 @@ pub fn run_metadata(facts: &RunFacts) -> Result<BTreeMap<String, String>, String
         },
     );
     m.insert(
-        "recorder".into(),
+        mole_types::graph::nodes::RECORDER.into(),
         format!("mole-recorder {}", env!("CARGO_PKG_VERSION")),
     );
     for (key, path) in [
@@ -60,6 +62,30 @@ pub fn run_metadata(facts: &RunFacts) -> Result<BTreeMap<String, String>, String
         m.insert(key.to_string(), content);
     }
     Ok(m)
+}
+
+/// The run's metadata from the recorder's command line: the stack's arguments (`common`), the
+/// launch file and scenario it runs, the source `revision` (default: [`source_revision`] of the
+/// working directory) and the decimation settings; an unreadable file is bad input.
+pub fn run_metadata_of(
+    common: &CommonArgs,
+    launch_file: Option<&Path>,
+    scenario: Option<&Path>,
+    revision: Option<&str>,
+    every: &Every,
+) -> Result<BTreeMap<String, String>, Box<dyn std::error::Error>> {
+    let cwd = std::env::current_dir()?;
+    let facts = RunFacts {
+        namespace: &common.namespace,
+        clock_mode: common.mode.name(),
+        rate_hz: common.rate_hz,
+        launch_file,
+        scenario,
+        revision: revision.map_or_else(|| source_revision(&cwd), str::to_owned),
+        every: every.describe(),
+        settings: common.settings.as_deref().unwrap_or_default(),
+    };
+    Ok(run_metadata(&facts).map_err(BadInput)?)
 }
 
 /// The source revision of the checkout `dir` is in (`git describe --always --dirty`: the

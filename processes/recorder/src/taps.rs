@@ -6,7 +6,7 @@
 //! launcher's keeper does (one wake-up a step; every other topic is published at most once a
 //! step, so its queue never fills). In realtime nothing wakes it: it drains at its own pace.
 
-use mole_recorder::{Event, Every, Gaps, ProcessWatch, Record, every::due};
+use crate::{Event, Every, Gaps, ProcessWatch, Record, every::due};
 use mole_runtime::{ClockMode, Context, RuntimeError, Subscriber, Waker};
 use mole_types::topics::{self, TopicVisitor};
 use mole_types::{Fault, Message, ParamChange, Processes, Topic, Truth, WorldMap};

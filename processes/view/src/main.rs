@@ -12,20 +12,14 @@
 //! /dev/shm, no stack needed); the recording's samples feed the scene up to the tick of a
 //! playback clock that the page plays, pauses, seeks and speeds up (`mole_view::Playback`).
 
-mod server;
-mod taps;
-
 use clap::Parser;
-use mole_runtime::{BadInput, CommonArgs, Context, Publisher, Wake, now_ns};
-use mole_types::{Goal, PACE_PAUSE, PACE_RUN, PACE_STEP, Pace, topics};
-use mole_view::{Access, DEFAULT_PORT, FrameClock, PageInput, Playback, Reel, Scene};
+use mole_runtime::{CommonArgs, Context, Wake};
+use mole_view::{Access, Controls, DEFAULT_PORT, FrameClock, Scene, Taps};
+use mole_view::{announce, listen, serve, show_recording};
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-use taps::Taps;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -58,172 +52,47 @@ fn main() -> ExitCode {
     mole_runtime::exit_code(run(&Args::parse()))
 }
 
-/// The operator topics the page's controls publish on.
-struct Controls {
-    goal: Publisher<Goal>,
-    pace: Publisher<Pace>,
-}
-
-impl Controls {
-    /// Publishes `command` at `tick`; of several goals at once only the newest counts.
-    fn publish(
-        &mut self,
-        commands: Vec<PageInput>,
-        tick: u64,
-    ) -> Result<(), mole_runtime::RuntimeError> {
-        let newest_goal = commands
-            .iter()
-            .rposition(|c| matches!(c, PageInput::Goal { .. }));
-        for (i, command) in commands.into_iter().enumerate() {
-            tracing::info!(?command, tick, "from the page");
-            let (op, steps) = match command {
-                PageInput::Goal { x, y } if Some(i) == newest_goal => {
-                    self.goal
-                        .publish(tick, now_ns(), |g| (g.x, g.y, g.tolerance) = (x, y, 0.0))?;
-                    continue;
-                }
-                PageInput::Goal { .. } => continue,
-                PageInput::Run => (PACE_RUN, 0),
-                PageInput::Pause => (PACE_PAUSE, 0),
-                PageInput::Step { steps } => (PACE_STEP, steps),
-                // The server refuses timeline ops in a live view.
-                PageInput::Timeline(_) => continue,
-            };
-            self.pace
-                .publish(tick, now_ns(), |p| (p.op, p.steps) = (op, steps))?;
-        }
-        Ok(())
-    }
-}
-
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    match &args.file {
-        Some(file) => recording(file, args),
-        None => live(args),
-    }
-}
-
-/// The listener on `--bind`:`--port` (in use → bad input) and the page's URL.
-fn listen(args: &Args) -> Result<(std::net::TcpListener, String), Box<dyn std::error::Error>> {
     let address = SocketAddr::new(args.bind, args.port);
-    let listener = std::net::TcpListener::bind(address)
-        .map_err(|e| BadInput(format!("cannot serve the view on {address}: {e}")))?;
-    let url = format!("http://{}/", listener.local_addr()?);
-    Ok((listener, url))
-}
-
-/// Says the page is served: its URL into `--ready-file`, for the launcher.
-fn announce(args: &Args, url: &str) -> std::io::Result<()> {
-    if let Some(file) = &args.ready_file {
-        std::fs::write(file, url)?;
+    match &args.file {
+        Some(file) => show_recording(file, address, args.ready_file.as_deref()),
+        None => live(args, address),
     }
-    Ok(())
-}
-
-/// The recording's view: read the file (refused before anything is served), then every
-/// [`mole_view::FRAME_PERIOD`] the pages' timeline ops, the clock, the frame at its tick; until Ctrl-C or
-/// SIGTERM.
-fn recording(file: &std::path::Path, args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    mole_runtime::init_tracing("view");
-    let reel = Reel::read(file).map_err(|e| BadInput(e.to_string()))?;
-    let mut playback = Playback::new(reel)
-        .ok_or_else(|| BadInput(format!("{}: no world map to draw", file.display())))?;
-    let (listener, url) = listen(args)?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))?;
-    let served = server::serve(listener, Access::Recording)?;
-    announce(args, &url)?;
-    let timeline = playback.clock.timeline();
-    tracing::info!(
-        %url,
-        file = %file.display(),
-        first_tick = timeline.first_tick,
-        last_tick = timeline.last_tick,
-        "serving the recording's view"
-    );
-    let mut frames = 0u64;
-    let mut last = Instant::now();
-    let (started, mut schedule) = (last, FrameClock::new(last));
-    while !stop.load(Ordering::SeqCst) {
-        std::thread::sleep(schedule.next().saturating_duration_since(Instant::now()));
-        if !schedule.due(Instant::now()) {
-            continue;
-        }
-        for command in served.commands.try_iter() {
-            if let PageInput::Timeline(op) = command {
-                tracing::debug!(?op, "from the page");
-                playback.clock.apply(op);
-            }
-        }
-        let now = Instant::now();
-        playback.clock.advance(now - last);
-        last = now;
-        let rejected = served.rejected.load(Ordering::Relaxed);
-        served.frames.send(playback.frame(rejected));
-        frames += 1;
-    }
-    tracing::info!(
-        frames,
-        elapsed_s = started.elapsed().as_secs_f64(),
-        rejected_inputs = served.rejected.load(Ordering::Relaxed),
-        "view finished"
-    );
-    Ok(())
 }
 
 /// The live view of the stack in the namespace `--namespace` names.
-fn live(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let (listener, url) = listen(args)?;
-    let mut ctx = Context::new("view", &args.common)?;
+fn live(args: &Args, address: SocketAddr) -> Result<(), Box<dyn std::error::Error>> {
+    let (listener, url) = listen(address)?;
+    let mut ctx = Context::new(mole_types::graph::nodes::VIEW, &args.common)?;
     ctx.silence_stats();
-    let mode = ctx.mode();
+    let (mode, controls) = (ctx.mode(), !args.no_controls);
     let mut taps = Taps::open(&ctx)?;
-    let mut controls = Controls {
-        goal: ctx.publisher(topics::OPERATOR_GOAL)?,
-        pace: ctx.publisher(topics::OPERATOR_PACE)?,
-    };
-    let served = server::serve(
-        listener,
-        Access::Live {
-            controls: !args.no_controls,
-        },
-    )?;
+    let mut operator = Controls::open(&ctx)?;
+    let served = serve(listener, Access::Live { controls })?;
     let waitset = ctx.waitset()?;
     let wakers = taps.wakers(mode);
     let _attached = waitset.attach_all(&wakers)?;
     ctx.ready();
-    announce(args, &url)?;
-    tracing::info!(%url, %mode, controls = !args.no_controls, "serving the view");
+    announce(args.ready_file.as_deref(), &url)?;
+    tracing::info!(%url, %mode, controls, "serving the view");
 
-    let mut scene: Option<Scene> = None;
-    let mut frames = 0u64;
-    let started = Instant::now();
+    let (mut scene, mut frames, started) = (None, 0u64, Instant::now());
     let mut schedule = FrameClock::new(started);
     loop {
         let wake = waitset.wait(&mut ctx, Some(schedule.next()))?;
-        taps.drain(&mut scene, mode.name(), !args.no_controls);
-        let commands: Vec<PageInput> = served.commands.try_iter().collect();
-        if !commands.is_empty() {
-            let tick = scene.as_ref().map_or(0, Scene::tick);
-            controls.publish(commands, tick)?;
-        }
+        taps.drain(&mut scene, mode.name(), controls);
+        let tick = scene.as_ref().map_or(0, Scene::tick);
+        operator.publish(served.commands.try_iter().collect(), tick)?;
         if schedule.due(Instant::now())
             && let Some(scene) = scene.as_mut()
         {
-            let rejected = served.rejected.load(Ordering::Relaxed);
-            served.frames.send(scene.frame(rejected));
+            served.frames.send(scene.frame(served.rejected()));
             frames += 1;
         }
         if wake == Wake::Shutdown {
             break;
         }
     }
-    tracing::info!(
-        frames,
-        elapsed_s = started.elapsed().as_secs_f64(),
-        rejected_inputs = served.rejected.load(Ordering::Relaxed),
-        "view finished"
-    );
+    served.finished(frames, started);
     Ok(())
 }

@@ -6,17 +6,24 @@
 //! ([`Client`]) and sends only the tiles that changed.
 //! A page's inputs go back to the main loop through a std channel; refused ones are counted
 //! and logged at debug.
+//!
+//! Before it serves, the view binds its address ([`listen`]); once it serves, it says so to the
+//! launcher ([`announce`]).
 
+use crate::{Access, Client, Frame, MAX_INPUT_BYTES, PageInput, Rejected, admit, parse_input};
 use axum::Router;
 use axum::extract::State;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
-use mole_view::{Access, Client, Frame, MAX_INPUT_BYTES, PageInput, Rejected, admit, parse_input};
+use mole_runtime::BadInput;
+use std::net::{SocketAddr, TcpListener};
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
+use std::time::Instant;
 use tokio::sync::broadcast;
 use tokio::sync::broadcast::error::{RecvError, TryRecvError};
 
@@ -65,15 +72,51 @@ impl Shared {
 
 /// The server's ends in the main loop.
 pub struct Served {
+    /// Where each frame goes to every page.
     pub frames: Frames,
+    /// The pages' inputs that were taken.
     pub commands: mpsc::Receiver<PageInput>,
     /// Inputs refused so far.
     pub rejected: Arc<AtomicU64>,
 }
 
+impl Served {
+    /// Inputs refused so far.
+    #[must_use]
+    pub fn rejected(&self) -> u64 {
+        self.rejected.load(Ordering::Relaxed)
+    }
+
+    /// Logs the view's end: `frames` made since `started`, inputs refused.
+    pub fn finished(&self, frames: u64, started: Instant) {
+        tracing::info!(
+            frames,
+            elapsed_s = started.elapsed().as_secs_f64(),
+            rejected_inputs = self.rejected(),
+            "view finished"
+        );
+    }
+}
+
+/// The listener on `address` (in use → bad input) and the page's URL.
+pub fn listen(address: SocketAddr) -> Result<(TcpListener, String), Box<dyn std::error::Error>> {
+    let listener = TcpListener::bind(address)
+        .map_err(|e| BadInput(format!("cannot serve the view on {address}: {e}")))?;
+    let url = format!("http://{}/", listener.local_addr()?);
+    Ok((listener, url))
+}
+
+/// Says the page is served: its URL into `ready_file` (`--ready-file`), for the launcher.
+pub fn announce(ready_file: Option<&Path>, url: &str) -> std::io::Result<()> {
+    if let Some(file) = ready_file {
+        std::fs::write(file, url)?;
+    }
+    Ok(())
+}
+
 /// Serves the page on `listener` (bound already, so a port in use is the caller's error) from
 /// a thread of its own; the pages' inputs that `access` takes go to [`Served::commands`].
-pub fn serve(listener: std::net::TcpListener, access: Access) -> std::io::Result<Served> {
+pub fn serve(listener: TcpListener, access: Access) -> std::io::Result<Served> {
     listener.set_nonblocking(true)?;
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()

@@ -2,20 +2,21 @@
 //!
 //! In lockstep a full queue makes its publisher wait, so every queue is read each step: the
 //! world's truth (published once a step) wakes the view, as it wakes the recorder. In realtime
-//! nothing wakes it: it drains every [`mole_view::FRAME_PERIOD`], and a queue that filled meanwhile
+//! nothing wakes it: it drains every [`crate::FRAME_PERIOD`], and a queue that filled meanwhile
 //! drops its oldest samples (the view shows the newest). The truth, the statistics and the
 //! process table are handed to the scene sample by sample (latency window, CPU deltas, events);
 //! of the others only the newest sample, once per drain.
 
+use crate::Scene;
 use mole_runtime::{ClockMode, Context, RuntimeError, Subscriber, Waker};
 use mole_types::{
     Fault, Grid, Landmarks, Message, ParamChange, Particles, PlanStatus, Pose, Processes, Scan,
     Stats, Truth, WorldMap, topics,
 };
-use mole_view::Scene;
 
 /// Every topic the view shows.
 pub struct Taps {
+    /// The world's map: its first sample starts the scene.
     pub map: Subscriber<WorldMap>,
     truth: Subscriber<Truth>,
     pose: Subscriber<Pose>,
