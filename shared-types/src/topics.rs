@@ -20,7 +20,25 @@ pub struct Topic<M> {
     /// Whether a full queue drops its oldest sample in lockstep too (a notice every process
     /// reads only now and then, which must never hold its publisher back).
     pub never_waits: bool,
+    /// Policy: what the tools around the stack do with the topic.
+    pub policy: Policy,
     _message: PhantomData<fn() -> M>,
+}
+
+/// What the tools around the stack do with a topic: columns of the topic table, so that a
+/// topic's treatment is written where the topic is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Policy {
+    /// The topic's name.
+    pub name: &'static str,
+    /// Bridge, realtime: large and superseded by the next step's, so a congested link may drop
+    /// it to the newest (lockstep carries every sample of every topic).
+    pub bulk: bool,
+    /// Bridge: the loop waits for it, so it crosses ahead of everything else.
+    pub urgent: bool,
+    /// Recorder: written once every this many ticks by default (1: every sample; the recorder's
+    /// `--every TOPIC=N` overrides).
+    pub record_every: u64,
 }
 
 impl<M> Clone for Topic<M> {
@@ -49,6 +67,12 @@ impl<M> Topic<M> {
             max_publishers: 2,
             max_subscribers: 16,
             never_waits: false,
+            policy: Policy {
+                name,
+                bulk: false,
+                urgent: false,
+                record_every: 1,
+            },
             _message: PhantomData,
         }
     }
@@ -72,10 +96,26 @@ impl<M> Topic<M> {
         self.never_waits = true;
         self
     }
+    /// See [`Policy::bulk`].
+    pub const fn bulk(mut self) -> Self {
+        self.policy.bulk = true;
+        self
+    }
+    /// See [`Policy::urgent`].
+    pub const fn urgent(mut self) -> Self {
+        self.policy.urgent = true;
+        self
+    }
+    /// See [`Policy::record_every`].
+    pub const fn record_every(mut self, ticks: u64) -> Self {
+        self.policy.record_every = ticks;
+        self
+    }
 }
 
-/// Declares every topic once: its constant, its message type and its service settings. From
-/// this one table come the constants, [`all`] (name and type name, in table order) and
+/// Declares every topic once: its constant, its message type, its service settings and its
+/// [`Policy`]. From this one table come the constants, [`all`] (name and type name, in table
+/// order), [`policies`] and
 /// [`for_each`], which hands every topic, typed, to a [`TopicVisitor`] (the layout table, the
 /// Python classes, tools that treat topics generically).
 macro_rules! topics {
@@ -85,6 +125,11 @@ macro_rules! topics {
         /// Every publish-subscribe topic with its message's type name, in table order.
         pub fn all() -> Vec<(&'static str, &'static str)> {
             vec![$(($constant.name, <$message as crate::Message>::wire_type_name())),+]
+        }
+
+        /// Every topic's policy, in table order.
+        pub fn policies() -> [Policy; [$(stringify!($constant)),+].len()] {
+            [$($constant.policy),+]
         }
 
         /// Hands every topic of the table, in order, to `visitor`.
@@ -111,20 +156,23 @@ topics! {
     WORLD_MAP: WorldMap = Topic::new("world/map").history(1).buffer(2);
     /// The true state after each step.
     WORLD_TRUTH: Truth = Topic::new("world/truth").history(1).buffer(64);
-    SENSING_SCAN: Scan = Topic::new("sensing/scan").history(2);
+    SENSING_SCAN: Scan = Topic::new("sensing/scan").history(2).bulk();
     SENSING_TACTILE: Tactile = Topic::new("sensing/tactile").history(2);
     SENSING_ODOM: Odom = Topic::new("sensing/odom").history(1);
     SENSING_BEACONS: Beacons = Topic::new("sensing/beacons").history(1);
     SENSING_FIX: Fix = Topic::new("sensing/fix").history(1);
     LOCALIZATION_POSE: Pose = Topic::new("localization/pose").history(2).buffer(64);
-    LOCALIZATION_PARTICLES: Particles = Topic::new("localization/particles").buffer(2);
+    LOCALIZATION_PARTICLES: Particles = Topic::new("localization/particles").buffer(2).bulk();
     /// The SLAM estimators' beacon map.
     LOCALIZATION_LANDMARKS: Landmarks = Topic::new("localization/landmarks").buffer(4);
     /// A smoother's optimised trajectory (GraphSLAM), after each finished solve.
-    LOCALIZATION_TRAJECTORY: Trajectory = Topic::new("localization/trajectory").buffer(2);
-    MAPPING_GRID: Grid = Topic::new("mapping/grid").history(1).buffer(4);
-    MAPPING_CONTACT: Grid = Topic::new("mapping/contact").history(1).buffer(4);
-    PLANNING_CMD: Cmd = Topic::new("planning/cmd").history(1);
+    LOCALIZATION_TRAJECTORY: Trajectory = Topic::new("localization/trajectory").buffer(2).bulk();
+    /// Recorded every 10 ticks by default: 0.1 s of simulated time at 100 Hz, what the
+    /// monitor's coverage curve samples too; 1.7 MB of raw grid a second instead of 52 MB.
+    MAPPING_GRID: Grid = Topic::new("mapping/grid").history(1).buffer(4).bulk().record_every(10);
+    MAPPING_CONTACT: Grid =
+        Topic::new("mapping/contact").history(1).buffer(4).bulk().record_every(10);
+    PLANNING_CMD: Cmd = Topic::new("planning/cmd").history(1).urgent();
     PLANNING_STATUS: PlanStatus = Topic::new("planning/status").buffer(4);
     STACK_TICK: Tick = Topic::new("stack/tick");
     STACK_STATS: Stats = Topic::new("stack/stats").buffer(64).max_publishers(32);

@@ -11,15 +11,6 @@ use mole_runtime::ClockMode;
 use mole_types::topics;
 use zenoh::qos::{CongestionControl, Priority};
 
-/// Realtime topics that may drop to the newest: large, and superseded by the next step's.
-pub const BULK: [&str; 5] = [
-    topics::SENSING_SCAN.name,
-    topics::MAPPING_GRID.name,
-    topics::MAPPING_CONTACT.name,
-    topics::LOCALIZATION_PARTICLES.name,
-    topics::LOCALIZATION_TRAJECTORY.name,
-];
-
 /// How one topic crosses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Delivery {
@@ -32,14 +23,14 @@ pub enum Delivery {
     Newest,
 }
 
-/// The delivery of `topic` in `mode`.
+/// The delivery of `topic` in `mode`, from the topic table's policy columns (`bulk`, `urgent`).
 #[must_use]
 pub fn delivery(topic: &str, mode: ClockMode) -> Delivery {
+    let policy = topics::policies().into_iter().find(|p| p.name == topic);
+    let (bulk, urgent) = policy.map_or((false, false), |p| (p.bulk, p.urgent));
     match mode {
-        ClockMode::Realtime if BULK.contains(&topic) => Delivery::Newest,
-        _ => Delivery::Reliable {
-            urgent: topic == topics::PLANNING_CMD.name,
-        },
+        ClockMode::Realtime if bulk => Delivery::Newest,
+        _ => Delivery::Reliable { urgent },
     }
 }
 

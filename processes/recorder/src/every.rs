@@ -1,19 +1,15 @@
 //! Which samples of a topic are written: every one, or one every N ticks for the large, slowly
 //! changing ones (`--every TOPIC=N`).
 //!
-//! Default: the frontier and contact grids (256 KiB each, published every step, changing a few
-//! cells a step) once every [`GRID_EVERY`] ticks, everything else every sample. The world map is
+//! Default: the topic table's `record_every` column (the frontier and contact grids, 256 KiB
+//! each, published every step, changing a few cells a step: once every 10 ticks), everything
+//! else every sample. The world map is
 //! published once and a smoother's trajectory after each solve, so they are already written only
 //! when they change. The last sample of a decimated topic is always written at the end, so the
 //! final grids (whose hashes summary.json holds) are in the file.
 
 use mole_types::topics;
 use std::collections::BTreeMap;
-
-/// Ticks between two written grids by default: 0.1 s of simulated time at 100 Hz, which is
-/// what the monitor's coverage curve samples too (every 10 steps); 1.7 MB of raw grid a second
-/// instead of 52 MB.
-pub const GRID_EVERY: u64 = 10;
 
 /// Per-topic decimation.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -23,9 +19,10 @@ pub struct Every {
 
 impl Default for Every {
     fn default() -> Self {
-        let ticks = [topics::MAPPING_GRID.name, topics::MAPPING_CONTACT.name]
+        let ticks = topics::policies()
             .into_iter()
-            .map(|t| (t.to_string(), GRID_EVERY))
+            .filter(|p| p.record_every > 1)
+            .map(|p| (p.name.to_string(), p.record_every))
             .collect();
         Every { ticks }
     }
@@ -91,8 +88,8 @@ mod tests {
     #[test]
     fn grids_default_to_every_ten_ticks_and_a_setting_overrides_it() {
         let every = Every::parse(&[]).expect("defaults");
-        assert_eq!(every.of("mapping/grid"), GRID_EVERY);
-        assert_eq!(every.of("mapping/contact"), GRID_EVERY);
+        assert_eq!(every.of("mapping/grid"), 10);
+        assert_eq!(every.of("mapping/contact"), 10);
         assert_eq!(every.of("world/truth"), 1);
         let every = Every::parse(&["mapping/grid=1".into(), "sensing/scan=5".into()]).unwrap();
         assert_eq!(every.of("mapping/grid"), 1);
