@@ -198,6 +198,18 @@ topics! {
         .never_waits();
 }
 
+/// The landmark map a robot offers to its peers (two robots, algorithms §6.9): its
+/// `localization/landmarks`, on a topic of its own in its namespace whose queue keeps only the
+/// newest map and never makes the robot wait for a reader. Between two stacks, so not in one
+/// stack's table above (no recorder, bridge or view of a stack reads it).
+pub const PEER_LANDMARKS: Topic<Landmarks> = Topic::new("peers/localization/landmarks").buffer(1);
+
+/// The channel of a recording that holds what happened to the stack's processes (started,
+/// exited, restarted, swapped, faults, settings changed), as the recorder writes it: not a
+/// publish-subscribe topic (the recorder gathers it from `stack/processes`, `stack/faults` and
+/// `stack/params`).
+pub const STACK_EVENTS: &str = "stack/events";
+
 /// A request-response service: its name and the types of its requests and responses.
 pub struct RequestResponse<Req, Resp> {
     /// The name below the namespace, e.g. `stack/control`.

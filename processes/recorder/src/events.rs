@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 
 /// The channel of events: JSON messages (message encoding `json`, schema encoding
 /// `jsonschema`), which any MCAP viewer shows as they are.
-pub const EVENTS_TOPIC: &str = "stack/events";
+pub const EVENTS_TOPIC: &str = mole_types::topics::STACK_EVENTS;
 /// The events' schema name.
 pub const EVENT_SCHEMA_NAME: &str = "mole.Event";
 /// The events' JSON schema.

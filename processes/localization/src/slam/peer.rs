@@ -13,12 +13,10 @@
 
 use crate::Estimator;
 use crate::slam::FuseReport;
-use mole_types::{EstimatorKind, Landmarks, Topic};
+use mole_types::{EstimatorKind, Landmarks};
 use thiserror::Error;
 
-/// The landmark map a robot offers to its peers: its `localization/landmarks`, on a topic of its
-/// own whose queue keeps only the newest map and never makes the robot wait for a reader.
-pub const PEER_LANDMARKS: Topic<Landmarks> = Topic::new("peers/localization/landmarks").buffer(1);
+pub use mole_types::topics::PEER_LANDMARKS;
 
 /// Steps between two fusions of the peer's map by default: 1 s at 100 Hz.
 pub const DEFAULT_FUSE_EVERY: u64 = 100;
