@@ -69,6 +69,17 @@ pub struct RobotSpec {
     pub max_alpha: f64,
 }
 
+impl RobotSpec {
+    /// The robot of a scenario that sets none: a 0.2 m disk at up to 0.5 m/s and 2 rad/s.
+    pub const SCENARIO_DEFAULT: RobotSpec = RobotSpec {
+        radius: 0.2,
+        max_speed: 0.5,
+        max_omega: 2.0,
+        max_accel: 2.0,
+        max_alpha: 8.0,
+    };
+}
+
 /// Sensor parameters and noise, as the world's scenario sets them.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable, ZeroCopySend, Layout)]

@@ -10,13 +10,7 @@ use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid};
 use std::hint::black_box;
 
 fn limits() -> RobotLimits {
-    RobotLimits {
-        radius: 0.2,
-        max_speed: 0.5,
-        max_omega: 2.0,
-        max_accel: 2.0,
-        max_alpha: 8.0,
-    }
+    RobotLimits::default()
 }
 
 /// A w × h grid at `res` with walls, scattered boxes, and the right third unexplored.

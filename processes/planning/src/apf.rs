@@ -605,13 +605,7 @@ mod tests {
 
     #[test]
     fn corrected_force_pushes_away_from_an_obstacle_cell_within_rho0() {
-        let limits = RobotLimits {
-            radius: 0.2,
-            max_speed: 0.5,
-            max_omega: 2.0,
-            max_accel: 2.0,
-            max_alpha: 8.0,
-        };
+        let limits = RobotLimits::default();
         let mut apf = Apf::new(limits, ApfConfig::default(), [9.0, 5.05], 1);
         let mut mask = vec![0u8; 100 * 100];
         mask[50 * 100 + 50] = 1; // cell [5.0, 5.1] × [5.0, 5.1]

@@ -1102,13 +1102,7 @@ mod tests {
     use core::f64::consts::PI;
 
     fn limits() -> RobotLimits {
-        RobotLimits {
-            radius: 0.2,
-            max_speed: 0.5,
-            max_omega: 2.0,
-            max_accel: 2.0,
-            max_alpha: 8.0,
-        }
+        RobotLimits::default()
     }
 
     /// PythonRobotics' default Config and obstacle list.

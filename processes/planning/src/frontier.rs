@@ -803,13 +803,7 @@ mod tests {
     use mole_types::CELL_OCCUPIED;
 
     fn limits() -> RobotLimits {
-        RobotLimits {
-            radius: 0.2,
-            max_speed: 0.5,
-            max_omega: 2.0,
-            max_accel: 2.0,
-            max_alpha: 8.0,
-        }
+        RobotLimits::default()
     }
 
     /// The DWA with default settings, as frontier's follower.

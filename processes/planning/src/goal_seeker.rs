@@ -134,13 +134,7 @@ mod tests {
 
     #[test]
     fn the_replanner_drives_after_a_bounce_then_hands_back() {
-        let limits = RobotLimits {
-            radius: 0.2,
-            max_speed: 0.5,
-            max_omega: 2.0,
-            max_accel: 2.0,
-            max_alpha: 8.0,
-        };
+        let limits = RobotLimits::default();
         let g = grid_free(60, 60, 0.05);
         let seeker = GoalSeeker::new(
             Box::new(crate::Dwa::new(

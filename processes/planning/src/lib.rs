@@ -89,6 +89,13 @@ pub struct RobotLimits {
     pub max_alpha: f64,
 }
 
+impl Default for RobotLimits {
+    /// The robot of a scenario that sets none ([`RobotSpec::SCENARIO_DEFAULT`]).
+    fn default() -> Self {
+        Self::from(&RobotSpec::SCENARIO_DEFAULT)
+    }
+}
+
 impl From<&RobotSpec> for RobotLimits {
     fn from(s: &RobotSpec) -> Self {
         Self {
@@ -580,13 +587,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn limits() -> RobotLimits {
-        RobotLimits {
-            radius: 0.2,
-            max_speed: 0.5,
-            max_omega: 2.0,
-            max_accel: 2.0,
-            max_alpha: 8.0,
-        }
+        RobotLimits::default()
     }
 
     /// Every kind builds (the goal seekers with a goal, and say which kind lacks one without),

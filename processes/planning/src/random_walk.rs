@@ -522,13 +522,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn limits() -> RobotLimits {
-        RobotLimits {
-            radius: 0.2,
-            max_speed: 0.5,
-            max_omega: 2.0,
-            max_accel: 2.0,
-            max_alpha: 8.0,
-        }
+        RobotLimits::default()
     }
 
     /// Step `tick` at `pose`, the robot standing (nothing sent yet).

@@ -21,13 +21,7 @@ const CELL: f64 = 0.25;
 
 /// The robot of the default scenario: 0.2 m disk, 0.5 m/s, 2 rad/s, 2 m/s², 8 rad/s².
 fn limits() -> RobotLimits {
-    RobotLimits {
-        radius: 0.2,
-        max_speed: 0.5,
-        max_omega: 2.0,
-        max_accel: 2.0,
-        max_alpha: 8.0,
-    }
+    RobotLimits::default()
 }
 
 /// Distance from (x, y) along heading `a` to the box wall.

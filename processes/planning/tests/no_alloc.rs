@@ -8,13 +8,7 @@ use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid, PlannerKind, P
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 fn limits() -> RobotLimits {
-    RobotLimits {
-        radius: 0.2,
-        max_speed: 0.5,
-        max_omega: 2.0,
-        max_accel: 2.0,
-        max_alpha: 8.0,
-    }
+    RobotLimits::default()
 }
 
 /// A 10 m × 10 m map at 0.05 m: walls, a box, the right half unexplored; a full-circle scan.

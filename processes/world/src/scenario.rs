@@ -105,12 +105,13 @@ struct RobotSection {
 
 impl Default for RobotSection {
     fn default() -> Self {
+        let r = mole_types::RobotSpec::SCENARIO_DEFAULT;
         Self {
-            radius: 0.2,
-            max_speed: 0.5,
-            max_omega: 2.0,
-            max_accel: 2.0,
-            max_alpha: 8.0,
+            radius: r.radius,
+            max_speed: r.max_speed,
+            max_omega: r.max_omega,
+            max_accel: r.max_accel,
+            max_alpha: r.max_alpha,
         }
     }
 }

@@ -7,13 +7,7 @@ use proptest::prelude::Just;
 const DT: f64 = 0.01;
 
 fn limits() -> RobotLimits {
-    RobotLimits {
-        radius: 0.2,
-        max_speed: 0.5,
-        max_omega: 2.0,
-        max_accel: 2.0,
-        max_alpha: 8.0,
-    }
+    RobotLimits::default()
 }
 
 /// Always wishes to drive straight ahead at 0.4 m/s; counts the re-plans it is asked for.
