@@ -129,11 +129,6 @@ impl Ekf {
         range_bearing_h(x, beacon)
     }
 
-    /// H_t = ∂h/∂x, analytic (algorithms §6.6).
-    pub fn jacobian_h(x: &Vector3<f64>, beacon: (f64, f64)) -> Matrix2x3<f64> {
-        range_bearing_jacobian_h(x, beacon)
-    }
-
     /// Readings refused as outliers by the χ² gate so far.
     pub fn rejected(&self) -> u64 {
         self.rejected

@@ -668,11 +668,6 @@ impl Monitor {
     }
 
     /// Loop latency quantile (µs), `None` before any command latency.
-    /// The loop latency's distribution, `[upper bound (µs), count]` per doubling bucket.
-    pub fn loop_latency_histogram_us(&self) -> Vec<[f64; 2]> {
-        histogram_us(&self.loop_latency_ns)
-    }
-
     pub fn loop_latency_us(&self, quantile: f64) -> Option<f64> {
         quantile_us(&self.loop_latency_ns, quantile)
     }

@@ -178,12 +178,6 @@ impl DistanceField {
         })
     }
 
-    /// Whether cell `idx` is occupied.
-    #[inline]
-    pub fn is_occupied(&self, idx: usize) -> bool {
-        self.occupied.get(idx).is_some_and(|o| *o != 0)
-    }
-
     fn rebuild(&mut self) {
         self.builds += 1;
         let (w, h) = (self.width, self.height);

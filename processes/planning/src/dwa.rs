@@ -591,11 +591,6 @@ impl Dwa {
         &mut self.scan_points
     }
 
-    /// The distance field of the occupied cells.
-    pub fn field_mut(&mut self) -> &mut DistanceField {
-        &mut self.field
-    }
-
     /// Whether the grid's distance field is used (default yes).
     pub fn set_use_grid(&mut self, on: bool) {
         self.use_grid = on;

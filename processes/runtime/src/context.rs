@@ -468,11 +468,11 @@ impl Context {
     }
 
     /// A waker for the close of the loop's step: the listener of the topic that closes it, the
-    /// command the world steps on (its one input in the graph), without a subscriber. `probe` is
+    /// command the world steps on (its one input in the graph), without a subscriber. `pending` is
     /// what the WaitSet looks at when a wait ends without a signal.
     pub(crate) fn loop_closed_waker(
         &self,
-        probe: Rc<dyn crate::ports::Probe>,
+        pending: Rc<dyn crate::ports::Pending>,
     ) -> Result<crate::ports::Waker, RuntimeError> {
         let topic = LOOP_CLOSE;
         let listener = self
@@ -484,7 +484,7 @@ impl Context {
         Ok(crate::ports::Waker {
             topic: topic.name,
             listener: Some(Rc::new(listener)),
-            probe,
+            pending,
         })
     }
 

@@ -342,7 +342,7 @@ impl<M: Message> Subscriber<M> {
         Waker {
             topic: self.topic,
             listener: self.listener.clone(),
-            probe: self.subscriber.clone(),
+            pending: self.subscriber.clone(),
         }
     }
 
@@ -408,7 +408,7 @@ impl<M: Message> Subscriber<M> {
 pub struct Waker {
     pub(crate) topic: &'static str,
     pub(crate) listener: Option<Rc<Listener<ipc::Service>>>,
-    pub(crate) probe: Rc<dyn Probe>,
+    pub(crate) pending: Rc<dyn Pending>,
 }
 
 impl Waker {
@@ -427,11 +427,11 @@ impl Waker {
 }
 
 /// Whether a subscriber's queue holds a sample: a look at shared memory, no system call.
-pub(crate) trait Probe {
+pub(crate) trait Pending {
     fn has_data(&self) -> bool;
 }
 
-impl<M: Message> Probe for iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()> {
+impl<M: Message> Pending for iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()> {
     fn has_data(&self) -> bool {
         self.has_samples().unwrap_or(false)
     }

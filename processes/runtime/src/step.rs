@@ -193,7 +193,7 @@ trait Port {
     /// Drops every queued sample (nothing can use them yet).
     fn discard(&mut self);
     /// A look at the input's queue, for a WaitSet that wakes on another topic.
-    fn probe(&self) -> std::rc::Rc<dyn crate::ports::Probe>;
+    fn pending(&self) -> std::rc::Rc<dyn crate::ports::Pending>;
 }
 
 struct Input<M: Message> {
@@ -246,7 +246,7 @@ impl<M: Message> Port for Input<M> {
     fn discard(&mut self) {
         self.subscriber.drain(|_| {});
     }
-    fn probe(&self) -> std::rc::Rc<dyn crate::ports::Probe> {
+    fn pending(&self) -> std::rc::Rc<dyn crate::ports::Pending> {
         self.subscriber.subscriber.clone()
     }
 }
@@ -431,8 +431,8 @@ impl Process {
         }
         let index = self.add(topic, rule, false)?;
         if !self.after_loop {
-            let probe = self.ports[index].probe();
-            self.wakers.push(self.ctx.loop_closed_waker(probe)?);
+            let pending = self.ports[index].pending();
+            self.wakers.push(self.ctx.loop_closed_waker(pending)?);
             self.after_loop = true;
         }
         Ok(index)
@@ -992,7 +992,7 @@ impl Port for TableInput {
         self
     }
     fn discard(&mut self) {}
-    fn probe(&self) -> std::rc::Rc<dyn crate::ports::Probe> {
+    fn pending(&self) -> std::rc::Rc<dyn crate::ports::Pending> {
         unreachable!("a rule table input has no queue")
     }
 }

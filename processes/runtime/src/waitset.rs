@@ -44,7 +44,7 @@ pub struct WaitSet {
     listeners:
         core::cell::RefCell<Vec<(RawFd, Rc<iceoryx2::port::listener::Listener<ipc::Service>>)>>,
     /// The queues of the attached subscribers, looked at when a wait ends without a signal.
-    probes: core::cell::RefCell<Vec<Rc<dyn crate::ports::Probe>>>,
+    pending: core::cell::RefCell<Vec<Rc<dyn crate::ports::Pending>>>,
     /// Whether a sample without its signal was reported already.
     missed_signal: core::cell::Cell<bool>,
 }
@@ -74,7 +74,7 @@ impl WaitSet {
             sockets: core::cell::RefCell::new(vec![PollFd::new(pipe, PollFlags::POLLIN)]),
             doorbell,
             listeners: core::cell::RefCell::new(Vec::new()),
-            probes: core::cell::RefCell::new(Vec::new()),
+            pending: core::cell::RefCell::new(Vec::new()),
             missed_signal: core::cell::Cell::new(false),
         }
     }
@@ -101,7 +101,7 @@ impl WaitSet {
         let fd = unsafe { BorrowedFd::borrow_raw(socket) };
         sockets.push(PollFd::new(fd, PollFlags::POLLIN));
         self.listeners.borrow_mut().push((socket, listener.clone()));
-        self.probes.borrow_mut().push(waker.probe.clone());
+        self.pending.borrow_mut().push(waker.pending.clone());
         Ok(Attachment {
             waitset: self,
             socket,
@@ -213,7 +213,7 @@ impl WaitSet {
             if ctx.mode() == ClockMode::Lockstep {
                 ctx.offer_history();
             }
-            if self.probes.borrow().iter().any(|p| p.has_data()) {
+            if self.pending.borrow().iter().any(|p| p.has_data()) {
                 if !self.missed_signal.replace(true) {
                     tracing::warn!(
                         "a sample came without its wake-up signal; found by looking (warned once)"

@@ -513,11 +513,6 @@ impl PoseGraph {
         &self.landmark_ids
     }
 
-    /// The landmark index of beacon `id`, if it has been seen.
-    pub fn landmark_index(&self, id: u32) -> Option<usize> {
-        self.landmark_ids.iter().position(|&i| i == id)
-    }
-
     /// Number of accepted readings.
     pub fn observation_count(&self) -> usize {
         self.problem.observations.len()

@@ -255,11 +255,6 @@ impl GraphSlamEstimator {
         self.smoothed_pose
     }
 
-    /// Whether the smoother still runs (it stops for good on a queue overflow or a full graph).
-    pub fn smoother_live(&self) -> bool {
-        self.live
-    }
-
     /// Waits until the smoother has every step recorded so far in its graph, has solved it and
     /// posted the solution, and takes that solution over. Not for the step path: this waits
     /// for a solve. Tests and the end of a run use it.
