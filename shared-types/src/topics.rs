@@ -39,6 +39,9 @@ pub struct Policy {
     /// Recorder: written once every this many ticks by default (1: every sample; the recorder's
     /// `--every TOPIC=N` overrides).
     pub record_every: u64,
+    /// View: drawn by the view, live and from a recording (a recording's other topics are not
+    /// read for it).
+    pub shown: bool,
 }
 
 impl<M> Clone for Topic<M> {
@@ -72,6 +75,7 @@ impl<M> Topic<M> {
                 bulk: false,
                 urgent: false,
                 record_every: 1,
+                shown: false,
             },
             _message: PhantomData,
         }
@@ -104,6 +108,11 @@ impl<M> Topic<M> {
     /// See [`Policy::urgent`].
     pub const fn urgent(mut self) -> Self {
         self.policy.urgent = true;
+        self
+    }
+    /// See [`Policy::shown`].
+    pub const fn shown(mut self) -> Self {
+        self.policy.shown = true;
         self
     }
     /// See [`Policy::record_every`].
@@ -153,31 +162,33 @@ pub trait TopicVisitor {
 // step's pose and scan for its restart, which then skipped it (the grid hash differed).
 topics! {
     /// The arena, robot and sensor settings, once (history 1 for processes that join late).
-    WORLD_MAP: WorldMap = Topic::new("world/map").history(1).buffer(2);
+    WORLD_MAP: WorldMap = Topic::new("world/map").history(1).buffer(2).shown();
     /// The true state after each step.
-    WORLD_TRUTH: Truth = Topic::new("world/truth").history(1).buffer(64);
-    SENSING_SCAN: Scan = Topic::new("sensing/scan").history(2).bulk();
+    WORLD_TRUTH: Truth = Topic::new("world/truth").history(1).buffer(64).shown();
+    SENSING_SCAN: Scan = Topic::new("sensing/scan").history(2).bulk().shown();
     SENSING_TACTILE: Tactile = Topic::new("sensing/tactile").history(2);
     SENSING_ODOM: Odom = Topic::new("sensing/odom").history(1);
     SENSING_BEACONS: Beacons = Topic::new("sensing/beacons").history(1);
     SENSING_FIX: Fix = Topic::new("sensing/fix").history(1);
-    LOCALIZATION_POSE: Pose = Topic::new("localization/pose").history(2).buffer(64);
-    LOCALIZATION_PARTICLES: Particles = Topic::new("localization/particles").buffer(2).bulk();
+    LOCALIZATION_POSE: Pose = Topic::new("localization/pose").history(2).buffer(64).shown();
+    LOCALIZATION_PARTICLES: Particles =
+        Topic::new("localization/particles").buffer(2).bulk().shown();
     /// The SLAM estimators' beacon map.
-    LOCALIZATION_LANDMARKS: Landmarks = Topic::new("localization/landmarks").buffer(4);
+    LOCALIZATION_LANDMARKS: Landmarks = Topic::new("localization/landmarks").buffer(4).shown();
     /// A smoother's optimised trajectory (GraphSLAM), after each finished solve.
     LOCALIZATION_TRAJECTORY: Trajectory = Topic::new("localization/trajectory").buffer(2).bulk();
     /// Recorded every 10 ticks by default: 0.1 s of simulated time at 100 Hz, what the
     /// monitor's coverage curve samples too; 1.7 MB of raw grid a second instead of 52 MB.
-    MAPPING_GRID: Grid = Topic::new("mapping/grid").history(1).buffer(4).bulk().record_every(10);
+    MAPPING_GRID: Grid =
+        Topic::new("mapping/grid").history(1).buffer(4).bulk().record_every(10).shown();
     MAPPING_CONTACT: Grid =
-        Topic::new("mapping/contact").history(1).buffer(4).bulk().record_every(10);
+        Topic::new("mapping/contact").history(1).buffer(4).bulk().record_every(10).shown();
     PLANNING_CMD: Cmd = Topic::new("planning/cmd").history(1).urgent();
-    PLANNING_STATUS: PlanStatus = Topic::new("planning/status").buffer(4);
+    PLANNING_STATUS: PlanStatus = Topic::new("planning/status").buffer(4).shown();
     STACK_TICK: Tick = Topic::new("stack/tick");
-    STACK_STATS: Stats = Topic::new("stack/stats").buffer(64).max_publishers(32);
+    STACK_STATS: Stats = Topic::new("stack/stats").buffer(64).max_publishers(32).shown();
     MONITOR_STATUS: RunStatus = Topic::new("monitor/status").history(1).buffer(4);
-    STACK_PROCESSES: Processes = Topic::new("stack/processes").history(1).buffer(4);
+    STACK_PROCESSES: Processes = Topic::new("stack/processes").history(1).buffer(4).shown();
     /// Where an operator (the view, a script) sends a goal-seeking planner; history 1: a
     /// restarted planner picks up the current goal.
     OPERATOR_GOAL: Goal = Topic::new("operator/goal").history(1);
@@ -186,8 +197,12 @@ topics! {
     OPERATOR_PACE: Pace = Topic::new("operator/pace").history(1);
     /// The faults `mole fault` injected, from the launcher to every process (each one's runtime
     /// applies those aimed at the topics it publishes) and observer; the last 8 from history.
-    STACK_FAULTS: crate::fault::Fault =
-        Topic::new("stack/faults").history(8).buffer(16).max_subscribers(64).never_waits();
+    STACK_FAULTS: crate::fault::Fault = Topic::new("stack/faults")
+        .history(8)
+        .buffer(16)
+        .max_subscribers(64)
+        .never_waits()
+        .shown();
     /// Settings changed while the stack runs (`mole param set`): the launcher's requests and
     /// each process's outcome (applied at a step, or refused and why); the last 8 from history.
     STACK_PARAMS: crate::ParamChange = Topic::new("stack/params")
@@ -195,7 +210,8 @@ topics! {
         .buffer(16)
         .max_publishers(32)
         .max_subscribers(64)
-        .never_waits();
+        .never_waits()
+        .shown();
 }
 
 /// The landmark map a robot offers to its peers (two robots, algorithms §6.9): its

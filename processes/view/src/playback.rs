@@ -203,22 +203,14 @@ pub enum ReelError {
     Incomplete { path: PathBuf, what: String },
 }
 
-/// Every topic the view shows, as recorded.
-pub const SHOWN: [&str; 13] = [
-    topics::WORLD_MAP.name,
-    topics::WORLD_TRUTH.name,
-    topics::LOCALIZATION_POSE.name,
-    topics::SENSING_SCAN.name,
-    topics::LOCALIZATION_PARTICLES.name,
-    topics::LOCALIZATION_LANDMARKS.name,
-    topics::PLANNING_STATUS.name,
-    topics::MAPPING_GRID.name,
-    topics::MAPPING_CONTACT.name,
-    topics::STACK_STATS.name,
-    topics::STACK_PROCESSES.name,
-    topics::STACK_FAULTS.name,
-    topics::STACK_PARAMS.name,
-];
+/// Every topic the view shows: the topic table's `shown` column.
+pub fn shown() -> Vec<&'static str> {
+    topics::policies()
+        .into_iter()
+        .filter(|p| p.shown)
+        .map(|p| p.name)
+        .collect()
+}
 
 /// A recording's shown topics in memory, each indexed by the world tick it was recorded at
 /// (its log time over the step: the header's tick for the topics a step publishes, the newest
@@ -264,7 +256,7 @@ impl Reel {
             .map_or("unknown", ClockMode::name);
         let mut reel = Reel::empty(mode, period_ns);
         let mut invalid = None;
-        for_each_sample(path, &SHOWN, |sample| {
+        for_each_sample(path, &shown(), |sample| {
             if invalid.is_none()
                 && let Err(why) = reel.add(&sample)
             {
@@ -507,6 +499,41 @@ mod tests {
             tick: message.header().tick,
             log_time: at * PERIOD_NS,
             data: bytemuck::bytes_of(message).to_vec(),
+        }
+    }
+
+    /// The topic table's `shown` column and the reel agree: a sample of every shown topic is
+    /// read (kept, or refused for its values), one of any other is passed by.
+    #[test]
+    fn the_reel_reads_every_shown_topic_and_only_those() {
+        let shown = shown();
+        assert!(shown.contains(&topics::MAPPING_GRID.name), "{shown:?}");
+        for (topic, _) in topics::all() {
+            let mut reel = Reel::empty("lockstep", PERIOD_NS);
+            let sample = Sample {
+                topic: topic.to_string(),
+                tick: 1,
+                log_time: PERIOD_NS,
+                data: vec![1, 2, 3],
+            };
+            let refused = reel.add(&sample).is_err();
+            let tracks = [
+                &reel.truth,
+                &reel.pose,
+                &reel.scan,
+                &reel.particles,
+                &reel.landmarks,
+                &reel.plan,
+                &reel.grid,
+                &reel.contact,
+                &reel.stats,
+                &reel.processes,
+                &reel.faults,
+                &reel.params,
+            ];
+            let kept = reel.map.is_some() || tracks.iter().any(|t| !t.ticks.is_empty());
+            let read = refused || kept;
+            assert_eq!(read, shown.contains(&topic), "{topic}: read {read}");
         }
     }
 
