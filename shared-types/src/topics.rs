@@ -154,6 +154,52 @@ pub trait TopicVisitor {
     fn visit<M: crate::Message>(&mut self, constant: &'static str, topic: Topic<M>);
 }
 
+/// What a tool that treats topics generically opens on each topic it wants, typed by the
+/// topic's message: a subscriber, a publisher, a bridge's port (see [`open_each`]).
+pub trait OpenTopic {
+    /// What opening one topic gives.
+    type Port;
+    /// Why a topic could not be opened.
+    type Error;
+    /// Opens `topic`.
+    fn open<M: crate::Message>(&mut self, topic: Topic<M>) -> Result<Self::Port, Self::Error>;
+}
+
+/// Opens, with `opener`, every topic of the table whose name `wanted` accepts, in table order;
+/// the first error ends it.
+pub fn open_each<O: OpenTopic>(
+    wanted: impl Fn(&str) -> bool,
+    opener: &mut O,
+) -> Result<Vec<O::Port>, O::Error> {
+    struct Each<'o, O: OpenTopic, W> {
+        opener: &'o mut O,
+        wanted: W,
+        ports: Vec<O::Port>,
+        error: Option<O::Error>,
+    }
+    impl<O: OpenTopic, W: Fn(&str) -> bool> TopicVisitor for Each<'_, O, W> {
+        fn visit<M: crate::Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
+            if self.error.is_none() && (self.wanted)(topic.name) {
+                match self.opener.open(topic) {
+                    Ok(port) => self.ports.push(port),
+                    Err(e) => self.error = Some(e),
+                }
+            }
+        }
+    }
+    let mut each = Each {
+        opener,
+        wanted,
+        ports: Vec::new(),
+        error: None,
+    };
+    for_each(&mut each);
+    match each.error {
+        Some(e) => Err(e),
+        None => Ok(each.ports),
+    }
+}
+
 // History 1 on the control loop's topics: a lockstep process restarted after a crash missed the
 // step sent while it was down; its publisher hands it that step from history while it waits
 // (`Context::offer_history`). History 2 on what mapping reads (pose, scan, tactile): mapping runs

@@ -12,7 +12,7 @@
 
 use crate::{BridgeSpec, Delivery, Entry, Failed, Inbox, delivery, key_expr};
 use mole_runtime::{BadInput, Context, PayloadLayout, Publisher, Ringer, layout_mismatch};
-use mole_types::topics::{self, TopicVisitor};
+use mole_types::topics::{self, OpenTopic};
 use mole_types::{Header, Message, Topic};
 use std::sync::Arc;
 use std::time::Duration;
@@ -226,14 +226,17 @@ fn open_ins(
         session: &'a zenoh::Session,
         spec: &'a BridgeSpec,
         inbox: &'a Arc<PeerInbox>,
-        ins: Vec<Box<dyn In>>,
-        error: Option<Failed>,
+        /// The inputs opened so far: the next one's index in the inbox's entries.
+        opened: usize,
     }
-    impl Open<'_> {
-        fn open<M: Message>(&self, topic: Topic<M>) -> Result<Box<dyn In>, Failed> {
+    impl OpenTopic for Open<'_> {
+        type Port = Box<dyn In>;
+        type Error = Failed;
+        fn open<M: Message>(&mut self, topic: Topic<M>) -> Result<Box<dyn In>, Failed> {
             let peer_key = key_expr(&self.spec.peer_namespace, topic.name);
             let newest_only = delivery(topic.name, self.ctx.mode()) == Delivery::Newest;
-            let (inbox, index) = (self.inbox.clone(), self.ins.len());
+            let (inbox, index) = (self.inbox.clone(), self.opened);
+            self.opened += 1;
             let subscriber = self
                 .session
                 .declare_subscriber(peer_key.clone())
@@ -256,29 +259,15 @@ fn open_ins(
             }))
         }
     }
-    impl TopicVisitor for Open<'_> {
-        fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
-            if self.error.is_none() && self.spec.inbound.contains(&topic.name) {
-                match self.open(topic) {
-                    Ok(input) => self.ins.push(input),
-                    Err(e) => self.error = Some(e),
-                }
-            }
-        }
-    }
+    let wanted = |name: &str| spec.inbound.contains(&name);
     let mut open = Open {
         ctx,
         session,
         spec,
         inbox,
-        ins: Vec::new(),
-        error: None,
+        opened: 0,
     };
-    topics::for_each(&mut open);
-    match open.error {
-        Some(e) => Err(e),
-        None => Ok(open.ins),
-    }
+    topics::open_each(wanted, &mut open)
 }
 
 /// Asks the peer for the newest sample of every topic in that keeps history; the replies join

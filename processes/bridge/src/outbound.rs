@@ -13,7 +13,7 @@
 
 use crate::{BridgeSpec, Failed, delivery, descriptor, key_expr, qos};
 use mole_runtime::{Context, Subscriber, Waker};
-use mole_types::topics::{self, TopicVisitor};
+use mole_types::topics::{self, OpenTopic};
 use mole_types::{Message, Topic};
 use std::sync::{Arc, Mutex};
 use zenoh::Wait;
@@ -160,11 +160,11 @@ fn open_outs(
         ctx: &'a Context,
         session: &'a zenoh::Session,
         spec: &'a BridgeSpec,
-        outs: Vec<Box<dyn Out>>,
-        error: Option<Failed>,
     }
-    impl Open<'_> {
-        fn open<M: Message>(&self, topic: Topic<M>) -> Result<Box<dyn Out>, Failed> {
+    impl OpenTopic for Open<'_> {
+        type Port = Box<dyn Out>;
+        type Error = Failed;
+        fn open<M: Message>(&mut self, topic: Topic<M>) -> Result<Box<dyn Out>, Failed> {
             let key = key_expr(&self.spec.namespace, topic.name);
             let (congestion, priority, express) = qos(delivery(topic.name, self.ctx.mode()));
             let publisher = self
@@ -207,28 +207,8 @@ fn open_outs(
             }))
         }
     }
-    impl TopicVisitor for Open<'_> {
-        fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
-            if self.error.is_none() && self.spec.out.contains(&topic.name) {
-                match self.open(topic) {
-                    Ok(out) => self.outs.push(out),
-                    Err(e) => self.error = Some(e),
-                }
-            }
-        }
-    }
-    let mut open = Open {
-        ctx,
-        session,
-        spec,
-        outs: Vec::new(),
-        error: None,
-    };
-    topics::for_each(&mut open);
-    match open.error {
-        Some(e) => Err(e),
-        None => Ok(open.outs),
-    }
+    let wanted = |name: &str| spec.out.contains(&name);
+    topics::open_each(wanted, &mut Open { ctx, session, spec })
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@ use mole_runtime::{
     BadInput, ClockMode, Context, LOCKSTEP_RESEND, Publisher, RuntimeError, Subscriber, WaitSet,
     Wake, Waker, now_ns,
 };
-use mole_types::topics::{self, TopicVisitor};
+use mole_types::topics::{self, OpenTopic};
 use mole_types::{EndReason, Message, TICK_END, TRUTH_END, Tick, Topic, Truth};
 use std::any::Any;
 use std::path::Path;
@@ -174,33 +174,16 @@ pub struct Outlets(Vec<Box<dyn Outlet>>);
 impl Outlets {
     /// Opens a publisher on every topic of `published`.
     pub fn open(ctx: &Context, published: &[&'static str]) -> Result<Outlets, RuntimeError> {
-        struct Open<'a> {
-            ctx: &'a Context,
-            published: &'a [&'static str],
-            outlets: Vec<Box<dyn Outlet>>,
-            error: Option<RuntimeError>,
-        }
-        impl TopicVisitor for Open<'_> {
-            fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
-                if self.error.is_none() && self.published.contains(&topic.name) {
-                    match self.ctx.publisher(topic) {
-                        Ok(p) => self.outlets.push(Box::new(p)),
-                        Err(e) => self.error = Some(e),
-                    }
-                }
+        struct Open<'a>(&'a Context);
+        impl OpenTopic for Open<'_> {
+            type Port = Box<dyn Outlet>;
+            type Error = RuntimeError;
+            fn open<M: Message>(&mut self, topic: Topic<M>) -> Result<Self::Port, RuntimeError> {
+                Ok(Box::new(self.0.publisher(topic)?))
             }
         }
-        let mut open = Open {
-            ctx,
-            published,
-            outlets: Vec::new(),
-            error: None,
-        };
-        topics::for_each(&mut open);
-        match open.error {
-            Some(e) => Err(e),
-            None => Ok(Outlets(open.outlets)),
-        }
+        let wanted = |name: &str| published.contains(&name);
+        topics::open_each(wanted, &mut Open(ctx)).map(Outlets)
     }
 
     /// Publishes `sample` on its topic (if it is played); `end` marks the run's last step.
@@ -261,33 +244,16 @@ impl Awaited {
             true => cast.awaited(),
             false => vec![topics::WORLD_TRUTH.name],
         };
-        struct Open<'a> {
-            ctx: &'a Context,
-            names: &'a [&'static str],
-            subscribers: Vec<Box<dyn Newest>>,
-            error: Option<RuntimeError>,
-        }
-        impl TopicVisitor for Open<'_> {
-            fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
-                if self.error.is_none() && self.names.contains(&topic.name) {
-                    match self.ctx.subscriber(topic) {
-                        Ok(s) => self.subscribers.push(Box::new(s)),
-                        Err(e) => self.error = Some(e),
-                    }
-                }
+        struct Open<'a>(&'a Context);
+        impl OpenTopic for Open<'_> {
+            type Port = Box<dyn Newest>;
+            type Error = RuntimeError;
+            fn open<M: Message>(&mut self, topic: Topic<M>) -> Result<Self::Port, RuntimeError> {
+                Ok(Box::new(self.0.subscriber(topic)?))
             }
         }
-        let mut open = Open {
-            ctx,
-            names: &names,
-            subscribers: Vec::new(),
-            error: None,
-        };
-        topics::for_each(&mut open);
-        match open.error {
-            Some(e) => Err(e),
-            None => Ok(Awaited(open.subscribers)),
-        }
+        let wanted = |name: &str| names.contains(&name);
+        topics::open_each(wanted, &mut Open(ctx)).map(Awaited)
     }
 
     /// The wakers of the awaited topics: each wakes the player.

@@ -8,7 +8,7 @@
 
 use crate::{Event, Every, Gaps, ProcessWatch, Record, every::due};
 use mole_runtime::{ClockMode, Context, RuntimeError, Subscriber, Waker};
-use mole_types::topics::{self, TopicVisitor};
+use mole_types::topics::{self, OpenTopic};
 use mole_types::{Fault, Message, ParamChange, Processes, Topic, Truth, WorldMap};
 use std::any::Any;
 use std::collections::BTreeMap;
@@ -185,52 +185,37 @@ impl Taps {
         struct Open<'a> {
             ctx: &'a Context,
             every: &'a Every,
-            taps: Vec<Box<dyn Tap>>,
-            error: Option<RuntimeError>,
         }
-        impl TopicVisitor for Open<'_> {
-            fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
-                if self.error.is_some() {
-                    return;
-                }
+        impl OpenTopic for Open<'_> {
+            type Port = Box<dyn Tap>;
+            type Error = RuntimeError;
+            fn open<M: Message>(&mut self, topic: Topic<M>) -> Result<Self::Port, RuntimeError> {
                 let wakes = self.ctx.mode() == ClockMode::Lockstep
                     && topic.name == topics::WORLD_TRUTH.name;
                 let subscriber = match wakes {
-                    true => self.ctx.subscriber(topic),
-                    false => self.ctx.passive_subscriber(topic),
+                    true => self.ctx.subscriber(topic)?,
+                    false => self.ctx.passive_subscriber(topic)?,
                 };
                 let stepped =
                     ![topics::STACK_STATS.name, topics::STACK_PROCESSES.name].contains(&topic.name);
-                match subscriber {
-                    Ok(subscriber) => self.taps.push(Box::new(Typed {
-                        subscriber,
-                        wakes,
-                        every: self.every.of(topic.name),
-                        stepped,
-                        last_written: None,
-                        newest_written: true,
-                        gaps: Gaps::default(),
-                        reported_lost: 0,
-                        decimated: 0,
-                    })),
-                    Err(e) => self.error = Some(e),
-                }
+                Ok(Box::new(Typed {
+                    subscriber,
+                    wakes,
+                    every: self.every.of(topic.name),
+                    stepped,
+                    last_written: None,
+                    newest_written: true,
+                    gaps: Gaps::default(),
+                    reported_lost: 0,
+                    decimated: 0,
+                }))
             }
         }
-        let mut open = Open {
-            ctx,
-            every,
-            taps: Vec::new(),
-            error: None,
-        };
-        topics::for_each(&mut open);
-        match open.error {
-            Some(e) => Err(e),
-            None => Ok(Taps {
-                taps: open.taps,
-                seen: Seen::default(),
-            }),
-        }
+        let taps = topics::open_each(|_| true, &mut Open { ctx, every })?;
+        Ok(Taps {
+            taps,
+            seen: Seen::default(),
+        })
     }
 
     /// The wakers of the topics that wake the recorder.

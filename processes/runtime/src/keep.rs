@@ -10,7 +10,7 @@ use crate::error::RuntimeError;
 use crate::ports::Subscriber;
 use crate::waitset::Wake;
 use crate::{ClockMode, Waker};
-use mole_types::topics::{self, TopicVisitor};
+use mole_types::topics::{self, OpenTopic};
 use mole_types::{Message, Topic};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, Sender};
@@ -128,47 +128,29 @@ impl LastSamples {
         ctx.silence_stats();
         struct Open<'a> {
             ctx: &'a Context,
-            names: &'a [&'a str],
             clock: &'a str,
-            kept: Vec<Box<dyn Kept>>,
-            error: Option<RuntimeError>,
         }
-        impl TopicVisitor for Open<'_> {
-            fn visit<M: Message>(&mut self, _constant: &'static str, topic: Topic<M>) {
-                if self.error.is_some() || !self.names.contains(&topic.name) {
-                    return;
-                }
+        impl OpenTopic for Open<'_> {
+            type Port = Box<dyn Kept>;
+            type Error = RuntimeError;
+            fn open<M: Message>(&mut self, topic: Topic<M>) -> Result<Self::Port, RuntimeError> {
                 let wakes = self.ctx.mode() == ClockMode::Lockstep && topic.name == self.clock;
-                let subscriber = match wakes {
-                    true => self.ctx.subscriber(topic),
-                    false => self.ctx.passive_subscriber(topic),
-                };
-                match subscriber {
-                    Ok(s) => self.kept.push(Box::new(s)),
-                    Err(e) => self.error = Some(e),
-                }
+                Ok(match wakes {
+                    true => Box::new(self.ctx.subscriber(topic)?),
+                    false => Box::new(self.ctx.passive_subscriber(topic)?),
+                })
             }
         }
-        let mut open = Open {
-            ctx: &ctx,
-            names,
-            clock,
-            kept: Vec::new(),
-            error: None,
-        };
-        topics::for_each(&mut open);
-        if let Some(e) = open.error {
-            return Err(e);
-        }
+        let wanted = |name: &str| names.contains(&name);
+        let kept = topics::open_each(wanted, &mut Open { ctx: &ctx, clock })?;
         if let Some(unknown) = names
             .iter()
-            .find(|n| !open.kept.iter().any(|k| k.topic() == **n))
+            .find(|n| !kept.iter().any(|k| k.topic() == **n))
         {
             return Err(RuntimeError::Setting(format!(
                 "cannot keep `{unknown}`: not a topic of the stack"
             )));
         }
-        let kept = open.kept;
         Ok(LastSamples { ctx, kept })
     }
 
