@@ -23,11 +23,8 @@ use mole_types::env;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// mole's bridge: topics of a namespace to and from a stack on another machine, over zenoh
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole-bridge",
-    about = "mole's bridge: topics of a namespace to and from a stack on another machine, over zenoh"
-)]
 struct Args {
     #[command(flatten)]
     common: CommonArgs,

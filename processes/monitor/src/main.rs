@@ -13,11 +13,8 @@ use std::time::Duration;
 
 const STATUS_PERIOD: Duration = Duration::from_millis(200);
 
+/// mole's observer: metrics, summary.json, map.png
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole-monitor",
-    about = "mole's observer: metrics, summary.json, map.png"
-)]
 struct Args {
     #[command(flatten)]
     common: CommonArgs,
@@ -31,11 +28,11 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    mole_runtime::exit_code(run(&Args::parse()))
+    let args = Args::parse();
+    mole_runtime::run_role(Role::Monitor, &args.common, |p| run(p, &args))
 }
 
-fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let mut p = Process::new(Role::Monitor.name(), &args.common)?;
+fn run(mut p: Process, args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     // The truth and the frontier grid wake the monitor; the rest is read on those wake-ups.
     let truth = p.observed(topics::WORLD_TRUTH, true)?;
     let pose = p.observed(topics::LOCALIZATION_POSE, false)?;
@@ -97,4 +94,60 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             Ok(if finished { Flow::End } else { Flow::Continue })
         },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mole_monitor::Summary;
+    use mole_runtime::Harness;
+    use mole_types::EndReason;
+    use mole_world::{World, bundled_scenario};
+
+    /// The main on a harness, as the observer: it judges every pose against the truth of its
+    /// tick, ends with the final truth (not waiting for the pose of the last step, one behind)
+    /// and writes summary.json with the run's names, and a last status saying it finished.
+    #[test]
+    fn the_final_truth_ends_the_run_with_every_pose_judged_against_its_truth() {
+        let scenario = bundled_scenario("default").unwrap();
+        let mut world = World::new(&scenario);
+        let harness = Harness::new();
+        harness.deliver(topics::WORLD_MAP, 0, |m| scenario.write_world_map(m));
+        for k in 0..=10 {
+            let end = (k == 10).then_some(EndReason::Ticks);
+            harness.deliver(topics::WORLD_TRUTH, k, |t| world.write_step(t, 0, end));
+            let at = world.pose();
+            // An estimate 0.1 m off the truth, in x, every step.
+            harness.deliver(topics::LOCALIZATION_POSE, k, |p| {
+                (p.x, p.y, p.theta) = (at.x + 0.1, at.y, at.theta);
+                p.covariance = [1e-2, 0.0, 0.0, 0.0, 1e-2, 0.0, 0.0, 0.0, 1e-2];
+            });
+            world.step(0.3, 0.2);
+        }
+        let out = std::env::temp_dir().join(format!("mole-monitor-harness-{}", std::process::id()));
+        let out_arg = out.to_str().unwrap();
+        let args = Args::parse_from(["mole-monitor", "--out", out_arg, "--planner", "dwa"]);
+        let ran = run(harness.process(Role::Monitor, &args.common).unwrap(), &args);
+        let summary = std::fs::read_to_string(out.join("summary.json"));
+        std::fs::remove_dir_all(&out).unwrap();
+        ran.unwrap();
+
+        let summary: Summary = serde_json::from_str(&summary.unwrap()).unwrap();
+        assert_eq!(
+            (summary.ticks, summary.end_reason.as_deref()),
+            (10, Some("ticks"))
+        );
+        assert_eq!(
+            (summary.planner.as_str(), summary.mode.as_str()),
+            ("dwa", "lockstep")
+        );
+        assert_eq!(summary.pose_samples, 10);
+        assert!((summary.localization_rmse_m.unwrap() - 0.1).abs() < 1e-9);
+        let statuses = harness.published(topics::MONITOR_STATUS);
+        assert_eq!(
+            statuses.last().map(|s| (s.header.tick, s.finished)),
+            Some((10, 1))
+        );
+        assert_eq!(harness.undelivered(), 1, "the last pose is not waited for");
+    }
 }

@@ -16,11 +16,8 @@ use mole_types::{env, topics};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// mole's recorder: every topic of a stack into one MCAP file
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole-recorder",
-    about = "mole's recorder: every topic of a stack into one MCAP file"
-)]
 struct Args {
     /// The MCAP file to write (replaced if it exists).
     file: PathBuf,

@@ -5,7 +5,7 @@ use crate::clock::ClockMode;
 use crate::doorbell::{Doorbell, LISTENER_NAME};
 use crate::error::{BadInput, RuntimeError};
 use crate::faults::FaultBoard;
-use crate::ports::{Publisher, Subscriber};
+use crate::ports::{Publisher, Queue, Subscriber};
 use crate::stats::StatsRegistry;
 use crate::time::init_tracing;
 use crate::waitset::{WaitSet, Wake};
@@ -99,9 +99,7 @@ type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Ser
 
 /// One process's link to the stack: its node in the namespace, its statistics, its shutdown flag.
 pub struct Context {
-    node: Node<ipc::Service>,
-    /// What wakes this node's WaitSets: every mole publisher of a topic it listens to rings it.
-    doorbell: Rc<Doorbell>,
+    wire: Wire,
     namespace: String,
     role: String,
     mode: ClockMode,
@@ -118,6 +116,18 @@ pub struct Context {
     history_offers: std::cell::RefCell<Vec<std::rc::Weak<dyn crate::ports::OfferHistory>>>,
     /// `stack/faults` as this process's publishers see it, opened with the first of them.
     faults: std::cell::OnceCell<Rc<FaultBoard>>,
+}
+
+/// What a context's ports run on.
+pub(crate) enum Wire {
+    /// iceoryx2: the node, and the doorbell that wakes this node's WaitSets (every mole
+    /// publisher of a topic it listens to rings it).
+    Ipc {
+        node: Node<ipc::Service>,
+        doorbell: Rc<Doorbell>,
+    },
+    /// A test's harness (`harness.rs`): queues in this process.
+    Bench(Rc<crate::harness::Bench>),
 }
 
 /// Lockstep: how long a publisher waits for a subscriber whose queue is full before it drops
@@ -147,16 +157,28 @@ impl Context {
     ) -> Result<Context, RuntimeError> {
         let node = create_node(&args.namespace, role)?;
         let doorbell = Rc::new(Doorbell::create(node.id().value())?);
-        let mut ctx = Context {
-            node,
-            doorbell,
+        let wire = Wire::Ipc { node, doorbell };
+        let mut ctx = Context::on_wire(wire, role, args, shutdown, StatsRegistry::default());
+        ctx.stats_publisher = Some(ctx.publisher(topics::STACK_STATS)?);
+        Ok(ctx)
+    }
+
+    pub(crate) fn on_wire(
+        wire: Wire,
+        role: &str,
+        args: &CommonArgs,
+        shutdown: Arc<AtomicBool>,
+        stats: StatsRegistry,
+    ) -> Context {
+        Context {
+            wire,
             namespace: args.namespace.clone(),
             role: role.to_string(),
             mode: args.mode,
             rate_hz: args.rate_hz,
             seed: args.seed,
             shutdown,
-            stats: StatsRegistry::default(),
+            stats,
             stats_publisher: None,
             last_stats: Instant::now(),
             steps: 0,
@@ -164,9 +186,15 @@ impl Context {
             resume: args.resume.clone(),
             history_offers: Default::default(),
             faults: Default::default(),
-        };
-        ctx.stats_publisher = Some(ctx.publisher(topics::STACK_STATS)?);
-        Ok(ctx)
+        }
+    }
+
+    /// The harness this context's ports run on, if it is a test's.
+    pub(crate) fn bench(&self) -> Option<&Rc<crate::harness::Bench>> {
+        match &self.wire {
+            Wire::Bench(bench) => Some(bench),
+            Wire::Ipc { .. } => None,
+        }
     }
 
     pub fn namespace(&self) -> &str {
@@ -231,8 +259,13 @@ impl Context {
         }
     }
 
-    pub(crate) fn node(&self) -> &Node<ipc::Service> {
-        &self.node
+    pub(crate) fn node(&self) -> Result<&Node<ipc::Service>, RuntimeError> {
+        match &self.wire {
+            Wire::Ipc { node, .. } => Ok(node),
+            Wire::Bench(_) => Err(RuntimeError::Setting(
+                "a process on a test harness has no iceoryx2 node".into(),
+            )),
+        }
     }
 
     /// `mole/<namespace>/<topic>` as an iceoryx2 service name.
@@ -264,7 +297,7 @@ impl Context {
         // drops the oldest sample, so a slow subscriber never stalls the pipeline.
         let safe_overflow = offer || topic.never_waits || self.mode != ClockMode::Lockstep;
         let pubsub = self
-            .node
+            .node()?
             .service_builder(&name)
             .publish_subscribe::<M>()
             .history_size(topic.history)
@@ -306,7 +339,7 @@ impl Context {
         topic: &Topic<M>,
     ) -> Result<EventFactory, RuntimeError> {
         let name = Self::service_name(namespace, topic.name)?;
-        self.node
+        self.node()?
             .service_builder(&name)
             .event()
             .max_notifiers(topic.max_publishers + 2)
@@ -417,20 +450,46 @@ impl Context {
         let stats = stats
             .register(topic.name, false)
             .map_err(|e| port_failed(format!("{e:?}")))?;
-        Ok(Subscriber {
-            topic: topic.name,
-            subscriber: Rc::new(subscriber),
+        Ok(Subscriber::new(
+            topic.name,
+            Queue::Shm(Rc::new(subscriber)),
             listener,
             stats,
-            latest: None,
-            pending: [None, None],
-            last_seq: None,
-            last_warning: None,
-        })
+        ))
+    }
+
+    /// A publisher on a harness: what it sends is kept for the test.
+    fn bench_publisher<M: Message>(
+        &self,
+        bench: &Rc<crate::harness::Bench>,
+        topic: &Topic<M>,
+    ) -> Result<Publisher<M>, RuntimeError> {
+        let stats = self
+            .stats
+            .register(topic.name, true)
+            .map_err(|e| RuntimeError::Port(format!("publisher on {}: {e:?}", topic.name)))?;
+        Ok(Publisher::on_bench(topic.name, bench.clone(), stats))
+    }
+
+    /// A subscriber on a harness: it reads what the test delivers.
+    fn bench_subscriber<M: Message>(
+        &self,
+        bench: &Rc<crate::harness::Bench>,
+        topic: &Topic<M>,
+    ) -> Result<Subscriber<M>, RuntimeError> {
+        let stats = self
+            .stats
+            .register(topic.name, false)
+            .map_err(|e| RuntimeError::Port(format!("subscriber on {}: {e:?}", topic.name)))?;
+        let queue = Queue::Fed(bench.inbox(topic.name));
+        Ok(Subscriber::new(topic.name, queue, None, stats))
     }
 
     /// A publisher on `topic`, with the event that wakes its subscribers.
     pub fn publisher<M: Message>(&self, topic: Topic<M>) -> Result<Publisher<M>, RuntimeError> {
+        if let Some(bench) = self.bench() {
+            return self.bench_publisher(bench, &topic);
+        }
         let pubsub = self.open_pubsub(&self.namespace, &topic, false)?;
         let event = self.open_event(&self.namespace, &topic)?;
         let waits = self.mode == ClockMode::Lockstep && !topic.never_waits;
@@ -462,6 +521,9 @@ impl Context {
         topic: Topic<M>,
         wakes: bool,
     ) -> Result<Subscriber<M>, RuntimeError> {
+        if let Some(bench) = self.bench() {
+            return self.bench_subscriber(bench, &topic);
+        }
         let pubsub = self.open_pubsub(&self.namespace, &topic, false)?;
         let event = self.open_event(&self.namespace, &topic)?;
         self.subscriber_on(&topic, pubsub, wakes.then_some(event), &self.stats)
@@ -475,6 +537,13 @@ impl Context {
         pending: Rc<dyn crate::ports::Pending>,
     ) -> Result<crate::ports::Waker, RuntimeError> {
         let topic = LOOP_CLOSE;
+        if self.bench().is_some() {
+            return Ok(crate::ports::Waker {
+                topic: topic.name,
+                listener: None,
+                pending,
+            });
+        }
         let listener = self
             .open_event(&self.namespace, &topic)?
             .listener_builder()
@@ -518,19 +587,30 @@ impl Context {
 
     /// A WaitSet for this process's wake-ups.
     pub fn waitset(&self) -> Result<WaitSet, RuntimeError> {
-        Ok(WaitSet::new(self.doorbell.clone()))
+        Ok(match &self.wire {
+            Wire::Ipc { doorbell, .. } => WaitSet::new(doorbell.clone()),
+            Wire::Bench(bench) => WaitSet::on_bench(bench.clone()),
+        })
     }
 
     /// A handle that wakes this node's WaitSet from another thread.
     pub fn ringer(&self) -> Result<crate::doorbell::Ringer, RuntimeError> {
-        self.doorbell.ringer()
+        match &self.wire {
+            Wire::Ipc { doorbell, .. } => doorbell.ringer(),
+            Wire::Bench(_) => Err(RuntimeError::Wait(
+                "a process on a test harness has no doorbell".into(),
+            )),
+        }
     }
 
     /// The read end of this node's doorbell, for tests that take a ring behind the WaitSet's
     /// back.
     #[doc(hidden)]
     pub fn doorbell_fd(&self) -> std::os::fd::BorrowedFd<'_> {
-        self.doorbell.fd()
+        match &self.wire {
+            Wire::Ipc { doorbell, .. } => doorbell.fd(),
+            Wire::Bench(_) => panic!("a process on a test harness has no doorbell"),
+        }
     }
 
     /// Announces that every port exists: publishes the first statistics at once, which is what
@@ -688,6 +768,9 @@ impl Context {
         &self,
         topic: Topic<M>,
     ) -> Result<Publisher<M>, RuntimeError> {
+        if let Some(bench) = self.bench() {
+            return self.bench_publisher(bench, &topic);
+        }
         let pubsub = self.open_pubsub(&self.namespace, &topic, true)?;
         let event = self.open_event(&self.namespace, &topic)?;
         self.publisher_on(&topic, pubsub, event, false)
@@ -707,6 +790,9 @@ impl Context {
             return Err(RuntimeError::Setting(format!(
                 "peer `{peer}` is this robot's own namespace: a peer is another robot's stack"
             )));
+        }
+        if let Some(bench) = self.bench() {
+            return self.bench_subscriber(bench, &topic);
         }
         let pubsub = self.open_pubsub(peer, &topic, true)?;
         self.subscriber_on(&topic, pubsub, None, &self.stats)

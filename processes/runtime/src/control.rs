@@ -73,7 +73,7 @@ pub struct ControlCall {
 impl Context {
     /// Serves `stack/control` in this context's namespace (the launcher does).
     pub fn control_server(&self) -> Result<ControlServer, RuntimeError> {
-        let service = control_service(self.node(), self.namespace(), true)?;
+        let service = control_service(self.node()?, self.namespace(), true)?;
         let server = service
             .server_builder()
             .create()

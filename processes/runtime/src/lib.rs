@@ -27,6 +27,7 @@ mod discover;
 mod doorbell;
 mod error;
 mod faults;
+mod harness;
 mod keep;
 mod observe;
 mod params;
@@ -45,12 +46,15 @@ pub use control::{ControlCall, ControlClient, ControlServer};
 pub use discover::stack_clock_mode;
 pub use doorbell::Ringer;
 pub use error::{BadInput, RuntimeError, exit_code};
+pub use harness::{Harness, same_payload};
 pub use keep::{LastSamples, SaveRequest, read_resume_file, resume_file};
 pub use observe::Observation;
 pub use params::{MAX_PENDING, ScheduledChange, Tuning};
 pub use ports::{Publisher, Subscriber, Waker};
 pub use source::{ClockEvent, Flow, LOCKSTEP_RESEND, REPLY_TIMEOUT};
 pub use stats::StatsRegistry;
-pub use step::{In, Order, Process, Rule, Start, Step, TAKEOVER_GRACE, Trigger, rule_table};
-pub use time::{init_tracing, now_ns};
+pub use step::{
+    In, Order, Process, Rule, Start, Step, TAKEOVER_GRACE, Trigger, rule_table, run_role,
+};
+pub use time::{init_tracing, now_ns, timed_ns};
 pub use waitset::{Attachment, WaitSet, Wake};

@@ -5,6 +5,7 @@
 use crate::doorbell::Rings;
 use crate::error::RuntimeError;
 use crate::faults::{Action, FaultBoard};
+use crate::harness::{Bench, Fed, Outbox};
 use crate::stats::PortHandle;
 use crate::time::now_ns;
 use iceoryx2::port::listener::Listener;
@@ -21,9 +22,7 @@ const WARN_EVERY: Duration = Duration::from_secs(5);
 /// A typed publisher bound to one topic.
 pub struct Publisher<M: Message> {
     pub(crate) topic: &'static str,
-    /// Shared with the context, which offers late subscribers the history while the process
-    /// waits ([`crate::Context::offer_history`]).
-    ports: Rc<PublisherPorts<M>>,
+    sink: Sink<M>,
     pub(crate) stats: PortHandle,
     pub(crate) seq: u64,
     /// The process's faults on demand (`mole fault`), looked up before every send.
@@ -31,6 +30,15 @@ pub struct Publisher<M: Message> {
     /// Lockstep: a corrupted sample is followed by the good one (lockstep delivers every
     /// sample); realtime: the corrupted one is all the readers get.
     lockstep: bool,
+}
+
+/// Where a publisher's samples go.
+enum Sink<M: Message> {
+    /// The topic's iceoryx2 ports; shared with the context, which offers late subscribers the
+    /// history while the process waits ([`crate::Context::offer_history`]).
+    Shm(Rc<PublisherPorts<M>>),
+    /// A test harness's record (`harness.rs`).
+    Fed(Rc<Outbox<M>>, Rc<Bench>),
 }
 
 /// A publisher's iceoryx2 ports.
@@ -76,16 +84,28 @@ impl<M: Message> Publisher<M> {
         let lockstep = faults.as_ref().is_some_and(|(_, lockstep)| *lockstep);
         Self {
             topic,
-            ports: Rc::new(PublisherPorts {
+            sink: Sink::Shm(Rc::new(PublisherPorts {
                 topic,
                 publisher,
                 notifier,
                 rings: Default::default(),
-            }),
+            })),
             stats,
             seq: 0,
             faults: faults.map(|(board, _)| board),
             lockstep,
+        }
+    }
+
+    /// A publisher on a test harness: what it sends goes to `outbox`.
+    pub(crate) fn on_bench(topic: &'static str, bench: Rc<Bench>, stats: PortHandle) -> Self {
+        Self {
+            topic,
+            sink: Sink::Fed(bench.outbox(topic), bench),
+            stats,
+            seq: 0,
+            faults: None,
+            lockstep: true,
         }
     }
 
@@ -94,8 +114,25 @@ impl<M: Message> Publisher<M> {
     where
         M: 'static,
     {
-        let ports: Rc<dyn OfferHistory> = self.ports.clone();
-        Rc::downgrade(&ports)
+        match &self.sink {
+            Sink::Shm(ports) => {
+                let ports: Rc<dyn OfferHistory> = ports.clone();
+                Rc::downgrade(&ports)
+            }
+            Sink::Fed(..) => std::rc::Weak::<PublisherPorts<M>>::new(),
+        }
+    }
+
+    /// Sets the header of a message about to be sent (`seq`, `tick`, `stamp_ns`, `origin_ns`);
+    /// returns the stamp.
+    fn stamp(&self, message: &mut M, tick: u64, origin_ns: u64) -> u64 {
+        let stamp_ns = now_ns();
+        let header = message.header_mut();
+        header.seq = self.seq;
+        header.tick = tick;
+        header.stamp_ns = stamp_ns;
+        header.origin_ns = origin_ns;
+        stamp_ns
     }
 
     /// Loans a sample in shared memory, lets `fill` write the payload in place, stamps the
@@ -109,7 +146,19 @@ impl<M: Message> Publisher<M> {
         origin_ns: u64,
         fill: impl FnOnce(&mut M),
     ) -> Result<(), RuntimeError> {
-        let sample = match self.ports.publisher.loan_uninit() {
+        let ports = match &self.sink {
+            Sink::Shm(ports) => ports.clone(),
+            Sink::Fed(outbox, bench) => {
+                let mut message: Box<M> = bytemuck::zeroed_box();
+                fill(&mut message);
+                self.stamp(&mut message, tick, origin_ns);
+                bench.keep(outbox, message);
+                self.seq += 1;
+                self.stats.counted(None);
+                return Ok(());
+            }
+        };
+        let sample = match ports.publisher.loan_uninit() {
             Ok(sample) => sample,
             Err(e) => {
                 self.stats.dropped(1);
@@ -120,14 +169,8 @@ impl<M: Message> Publisher<M> {
         // was mapped and that only ever holds whole messages afterwards, so every byte is
         // initialised; `M: Pod` makes any byte pattern a valid `M`.
         let mut sample = unsafe { sample.assume_init() };
-        let message = sample.payload_mut();
-        fill(message);
-        let stamp_ns = now_ns();
-        let header = message.header_mut();
-        header.seq = self.seq;
-        header.tick = tick;
-        header.stamp_ns = stamp_ns;
-        header.origin_ns = origin_ns;
+        fill(sample.payload_mut());
+        let stamp_ns = self.stamp(sample.payload_mut(), tick, origin_ns);
         let action = self
             .faults
             .as_ref()
@@ -157,7 +200,7 @@ impl<M: Message> Publisher<M> {
         }
         self.seq += 1;
         self.stats.counted(None);
-        self.ports.wake_listeners();
+        ports.wake_listeners();
         Ok(())
     }
 
@@ -165,8 +208,10 @@ impl<M: Message> Publisher<M> {
     /// ahead of it, so every reader's validation must refuse one sample and the run still gets
     /// the good one (lockstep delivers every sample; a lost one would stall it).
     fn send_corrupted_copy(&mut self, message: &M, seed: u64) -> Result<(), RuntimeError> {
-        let copy = self
-            .ports
+        let Sink::Shm(ports) = &self.sink else {
+            return Ok(());
+        };
+        let copy = ports
             .publisher
             .loan_uninit()
             .map_err(|e| RuntimeError::Port(format!("loan on {}: {e:?}", self.topic)))?;
@@ -182,7 +227,9 @@ impl<M: Message> Publisher<M> {
     /// Connects subscribers that appeared since the last send and delivers them the history
     /// (world/map keeps one sample for late joiners); wakes them if anything was delivered.
     pub fn update_connections(&self) {
-        self.ports.update_connections();
+        if let Sink::Shm(ports) = &self.sink {
+            ports.update_connections();
+        }
     }
 
     /// The topic name (without the namespace).
@@ -206,20 +253,69 @@ impl<M: Message> Publisher<M> {
 /// A typed subscriber bound to one topic.
 pub struct Subscriber<M: Message> {
     pub(crate) topic: &'static str,
-    /// Shared with the [`Waker`], whose WaitSet looks at its queue when a signal went missing.
-    pub(crate) subscriber: Rc<iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()>>,
+    /// Shared with the [`Waker`], whose WaitSet looks at it when a signal went missing.
+    queue: Queue<M>,
     /// `None` for a passive subscriber: no publisher signals it.
     pub(crate) listener: Option<Rc<Listener<ipc::Service>>>,
     pub(crate) stats: PortHandle,
-    pub(crate) latest: Option<Sample<ipc::Service, M, ()>>,
+    latest: Option<Held<M>>,
     /// Samples newer than [`Subscriber::update_through`] asked for, held for a later call:
     /// one per publisher (two while a hot swap runs both side by side).
-    pub(crate) pending: [Option<Sample<ipc::Service, M, ()>>; 2],
-    pub(crate) last_seq: Option<u64>,
-    pub(crate) last_warning: Option<Instant>,
+    pending: [Option<Held<M>>; 2],
+    last_seq: Option<u64>,
+    last_warning: Option<Instant>,
+}
+
+/// Where a subscriber's samples come from.
+pub(crate) enum Queue<M: Message> {
+    /// The topic's iceoryx2 service.
+    Shm(Rc<iceoryx2::port::subscriber::Subscriber<ipc::Service, M, ()>>),
+    /// A test harness's queue (`harness.rs`).
+    Fed(Rc<Fed<M>>),
+}
+
+/// A received sample, held: borrowed from shared memory, or owned on a test harness.
+enum Held<M: Message> {
+    Shm(Sample<ipc::Service, M, ()>),
+    Fed(Box<M>),
+}
+
+impl<M: Message> Held<M> {
+    fn payload(&self) -> &M {
+        match self {
+            Held::Shm(sample) => sample.payload(),
+            Held::Fed(message) => message,
+        }
+    }
 }
 
 impl<M: Message> Subscriber<M> {
+    pub(crate) fn new(
+        topic: &'static str,
+        queue: Queue<M>,
+        listener: Option<Rc<Listener<ipc::Service>>>,
+        stats: PortHandle,
+    ) -> Self {
+        Subscriber {
+            topic,
+            queue,
+            listener,
+            stats,
+            latest: None,
+            pending: [None, None],
+            last_seq: None,
+            last_warning: None,
+        }
+    }
+
+    /// A look at the queue, for a WaitSet.
+    pub(crate) fn pending(&self) -> Rc<dyn Pending> {
+        match &self.queue {
+            Queue::Shm(subscriber) => subscriber.clone(),
+            Queue::Fed(fed) => fed.clone(),
+        }
+    }
+
     /// Takes every new message in arrival order; invalid ones are dropped and counted. The last
     /// valid one stays available through [`Subscriber::latest`]. Returns how many were valid.
     ///
@@ -274,7 +370,7 @@ impl<M: Message> Subscriber<M> {
     }
 
     /// Keeps `sample` as the latest unless an older step; returns whether it was kept.
-    fn keep_if_newest(&mut self, sample: Sample<ipc::Service, M, ()>) -> bool {
+    fn keep_if_newest(&mut self, sample: Held<M>) -> bool {
         if self
             .tick()
             .is_some_and(|newest| sample.payload().header().tick < newest)
@@ -286,7 +382,7 @@ impl<M: Message> Subscriber<M> {
     }
 
     /// Makes `sample` the latest, releasing the older one first (at most two are borrowed).
-    fn hold(&mut self, sample: Sample<ipc::Service, M, ()>) {
+    fn hold(&mut self, sample: Held<M>) {
         self.latest = None;
         self.latest = Some(sample);
     }
@@ -342,7 +438,7 @@ impl<M: Message> Subscriber<M> {
         Waker {
             topic: self.topic,
             listener: self.listener.clone(),
-            pending: self.subscriber.clone(),
+            pending: self.pending(),
         }
     }
 
@@ -356,21 +452,28 @@ impl<M: Message> Subscriber<M> {
     }
 
     /// The held-back sample of the lowest step, if any.
-    fn take_pending(&mut self) -> Option<Sample<ipc::Service, M, ()>> {
+    fn take_pending(&mut self) -> Option<Held<M>> {
         let (_, slot) = self.lowest_pending()?;
         self.pending[slot].take()
     }
 
-    fn next_valid(&mut self) -> Option<Sample<ipc::Service, M, ()>> {
-        loop {
-            let sample = match self.subscriber.receive() {
-                Ok(Some(sample)) => sample,
-                Ok(None) => return None,
+    /// The next sample in the queue, if any.
+    fn receive(&self) -> Option<Held<M>> {
+        match &self.queue {
+            Queue::Shm(subscriber) => match subscriber.receive() {
+                Ok(sample) => sample.map(Held::Shm),
                 Err(e) => {
                     tracing::debug!(topic = self.topic, "receive failed: {e:?}");
-                    return None;
+                    None
                 }
-            };
+            },
+            Queue::Fed(fed) => fed.queue.borrow_mut().pop_front().map(Held::Fed),
+        }
+    }
+
+    fn next_valid(&mut self) -> Option<Held<M>> {
+        loop {
+            let sample = self.receive()?;
             let message = sample.payload();
             if let Err(why) = message.validate() {
                 self.stats.invalid();

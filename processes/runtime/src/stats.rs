@@ -58,6 +58,15 @@ impl StatsRegistry {
         })
     }
 
+    /// The invalid samples the subscribers of `topic` dropped.
+    pub(crate) fn invalid(&self, topic: &str) -> u64 {
+        let ports = self.ports.borrow();
+        let mine = ports.iter().filter(|p| p.topic == topic);
+        mine.filter(|p| p.direction == DIRECTION_SUBSCRIBE)
+            .map(|p| p.invalid)
+            .sum()
+    }
+
     /// Writes every port's counters into `out` (all but header, process, pid, cpu, rss, steps)
     /// and starts a new window of `window_s` seconds.
     pub fn write_and_reset_window(&self, out: &mut Stats, window_s: f64) {

@@ -247,8 +247,23 @@ impl<M: Message> Port for Input<M> {
         self.subscriber.drain(|_| {});
     }
     fn pending(&self) -> std::rc::Rc<dyn crate::ports::Pending> {
-        self.subscriber.subscriber.clone()
+        self.subscriber.pending()
     }
+}
+
+/// A role's main: its process in the stack the arguments name, handed to `dataflow` (the main's
+/// own, which a unit test hands a [`crate::Harness`]'s process instead); the exit code says how
+/// it ended ([`crate::exit_code`]).
+pub fn run_role(
+    role: Role,
+    args: &CommonArgs,
+    dataflow: impl FnOnce(Process) -> Result<(), BoxError>,
+) -> std::process::ExitCode {
+    crate::exit_code(
+        Process::new(role.name(), args)
+            .map_err(Into::into)
+            .and_then(dataflow),
+    )
 }
 
 /// A process of the control loop: its context, its declared inputs, its wake-ups.
@@ -288,7 +303,7 @@ impl Process {
         Self::on(Context::with_shutdown_flag(role, args, shutdown)?)
     }
 
-    fn on(ctx: Context) -> Result<Process, RuntimeError> {
+    pub(crate) fn on(ctx: Context) -> Result<Process, RuntimeError> {
         Ok(Process {
             map: ctx.subscriber(topics::WORLD_MAP)?,
             ctx,

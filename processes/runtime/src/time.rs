@@ -10,6 +10,13 @@ pub fn now_ns() -> u64 {
     }
 }
 
+/// How long `work` took, in nanoseconds of [`now_ns`]'s clock.
+pub fn timed_ns(work: impl FnOnce()) -> u64 {
+    let started = now_ns();
+    work();
+    now_ns().saturating_sub(started)
+}
+
 /// Logs to stderr through `tracing`, filtered by RUST_LOG (default `info`); iceoryx2's own log
 /// shows errors only unless IOX2_LOG_LEVEL says otherwise.
 pub fn init_tracing(role: &str) {

@@ -4,6 +4,7 @@ use crate::clock::ClockMode;
 use crate::context::Context;
 use crate::doorbell::Doorbell;
 use crate::error::RuntimeError;
+use crate::harness::Bench;
 use crate::ports::Waker;
 use iceoryx2::prelude::*;
 use nix::poll::{PollFd, PollFlags, PollTimeout};
@@ -33,8 +34,10 @@ pub enum Wake {
 /// are not mole Rust processes notify (`doorbell.rs`). It polls rather than using iceoryx2's
 /// WaitSet, which allocates on every wake-up: a step of a process allocates nothing.
 pub struct WaitSet {
-    /// The node's doorbell; always the first entry of `sockets`.
-    doorbell: Rc<Doorbell>,
+    /// The node's doorbell; always the first entry of `sockets`. `None` on a test harness.
+    doorbell: Option<Rc<Doorbell>>,
+    /// A test harness (`harness.rs`): a wait makes its next delivery instead of sleeping.
+    bench: Option<Rc<Bench>>,
     /// What poll(2) watches: the doorbell, then the sockets of the attached listeners, kept
     /// between waits.
     sockets: core::cell::RefCell<Vec<PollFd<'static>>>,
@@ -72,15 +75,36 @@ impl WaitSet {
         let pipe = unsafe { BorrowedFd::borrow_raw(doorbell.fd().as_raw_fd()) };
         WaitSet {
             sockets: core::cell::RefCell::new(vec![PollFd::new(pipe, PollFlags::POLLIN)]),
-            doorbell,
+            doorbell: Some(doorbell),
+            bench: None,
             listeners: core::cell::RefCell::new(Vec::new()),
             pending: core::cell::RefCell::new(Vec::new()),
             missed_signal: core::cell::Cell::new(false),
         }
     }
 
+    /// A WaitSet on a test harness: each wait makes the harness's next delivery.
+    pub(crate) fn on_bench(bench: Rc<Bench>) -> WaitSet {
+        WaitSet {
+            doorbell: None,
+            bench: Some(bench),
+            sockets: Default::default(),
+            listeners: Default::default(),
+            pending: Default::default(),
+            missed_signal: Default::default(),
+        }
+    }
+
     /// Wakes this WaitSet whenever the waker's topic is published.
     pub fn attach<'w, 'a>(&'w self, waker: &'a Waker) -> Result<Attachment<'w, 'a>, RuntimeError> {
+        if self.bench.is_some() {
+            // Every delivery wakes the process: nothing to listen to.
+            return Ok(Attachment {
+                waitset: self,
+                socket: -1,
+                _waker: core::marker::PhantomData,
+            });
+        }
         let Some(listener) = &waker.listener else {
             return Err(RuntimeError::Wait(format!(
                 "{} was opened passive: it cannot wake a WaitSet",
@@ -130,8 +154,10 @@ impl WaitSet {
 
     /// Empties the doorbell if `socket` is its pipe, else drains the listener of `socket`.
     fn take(&self, socket: RawFd) {
-        if socket == self.doorbell.fd().as_raw_fd() {
-            self.doorbell.empty();
+        if let Some(doorbell) = &self.doorbell
+            && socket == doorbell.fd().as_raw_fd()
+        {
+            doorbell.empty();
             return;
         }
         if let Some((_, listener)) = self.listeners.borrow().iter().find(|(s, _)| *s == socket) {
@@ -148,7 +174,9 @@ impl WaitSet {
     /// which programs other than mole's notify; a doorbell ring is a byte in a pipe and cannot be
     /// coalesced away.
     fn take_all(&self) {
-        self.doorbell.empty();
+        if let Some(doorbell) = &self.doorbell {
+            doorbell.empty();
+        }
         for (_, listener) in self.listeners.borrow().iter() {
             let _ = listener.try_wait(|_| {});
         }
@@ -157,6 +185,13 @@ impl WaitSet {
     /// Sleeps until data, `deadline` (if any) or a shutdown; publishes the statistics on the
     /// way when they are due.
     pub fn wait(&self, ctx: &mut Context, deadline: Option<Instant>) -> Result<Wake, RuntimeError> {
+        if let Some(bench) = &self.bench {
+            // A harness runs out of deliveries as a stack is shut down.
+            return Ok(match !ctx.shutdown_requested() && bench.deliver_next() {
+                true => Wake::Data,
+                false => Wake::Shutdown,
+            });
+        }
         // Lockstep never sleeps longer than LOCKSTEP_RECHECK without looking at its inputs: a
         // step whose wake-up went missing costs that long instead of stopping the stack.
         let deadline = match (deadline, ctx.mode()) {

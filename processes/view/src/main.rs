@@ -21,11 +21,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
+/// mole's live view: the running stack in a browser
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole-view",
-    about = "mole's live view: the running stack in a browser"
-)]
 struct Args {
     #[command(flatten)]
     common: CommonArgs,

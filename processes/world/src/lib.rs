@@ -20,7 +20,10 @@ pub mod world;
 pub use families::{Family, GenerateError, WorldSpec, generate, scenario_toml, world_toml};
 pub use free_space::FreeSpace;
 pub use rosmap::{MapError, OccupancyMap, load_ros_map};
-pub use scenario::{Goal, Location, Scenario, ScenarioError, load_scenario, parse_scenario};
+pub use scenario::{
+    Goal, Location, Scenario, ScenarioError, bundled_scenario, bundled_scenarios, load_scenario,
+    parse_scenario,
+};
 pub use world::{CONTACT_SKIN, World};
 
 /// Counts heap allocations per thread, so tests can prove a hot path allocates nothing.

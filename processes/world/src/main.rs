@@ -15,11 +15,8 @@ use std::process::ExitCode;
 /// How often late subscribers (a restarted process) are handed the map from history.
 const MAP_REFRESH_TICKS: u64 = 25;
 
+/// mole's world simulation: unicycle dynamics, contacts, ground truth
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole-world",
-    about = "mole's world simulation: unicycle dynamics, contacts, ground truth"
-)]
 struct Args {
     #[command(flatten)]
     common: CommonArgs,
@@ -35,14 +32,14 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    mole_runtime::exit_code(run(&Args::parse()))
+    let args = Args::parse();
+    mole_runtime::run_role(Role::World, &args.common, |p| run(p, &args))
 }
 
-fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
+fn run(mut p: Process, args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut scenario =
         load_scenario(&args.scenario).map_err(|e| mole_runtime::BadInput(e.to_string()))?;
     scenario.seed = args.common.seed.unwrap_or(scenario.seed);
-    let mut p = Process::new(Role::World.name(), &args.common)?;
     if args.paused {
         p.start_held();
     }
@@ -93,4 +90,61 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             Flow::Continue
         })
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mole_runtime::{Harness, same_payload};
+    use mole_types::{TRUTH_END, Truth};
+
+    /// The main on a harness, as the clock: it publishes the map and step 0, takes a step on
+    /// each reply to the step it published (an answer to an older step does not count), steps
+    /// the robot by it, and ends at the tick limit with the end on the last truth.
+    #[test]
+    fn each_reply_to_the_published_step_advances_the_world_to_the_tick_limit() {
+        let path = mole_world::bundled_scenarios().join("default.toml");
+        let path = path.to_str().unwrap();
+        let args = Args::parse_from(["mole-world", "--scenario", path, "--ticks", "3"]);
+        let harness = Harness::new();
+        let command =
+            |k: u64| move |c: &mut mole_types::Cmd| (c.v, c.omega) = (0.2 * k as f64, 0.5);
+        for k in 0..5 {
+            harness.deliver(topics::PLANNING_CMD, k, command(k));
+            if k == 1 {
+                // A late resend of step 0's answer, after step 1's.
+                harness.deliver(topics::PLANNING_CMD, 0, command(9));
+            }
+        }
+        run(harness.process(Role::World, &args.common).unwrap(), &args).unwrap();
+
+        let scenario = load_scenario(path.as_ref()).unwrap();
+        let expected_map = scenario.world_map();
+        let maps = harness.published(topics::WORLD_MAP);
+        assert_eq!(maps.len(), 1);
+        assert!(same_payload(&*expected_map, &*maps[0]));
+        let (truths, ticks) = (
+            harness.published(topics::WORLD_TRUTH),
+            harness.published(topics::STACK_TICK),
+        );
+        assert_eq!((truths.len(), ticks.len()), (4, 4));
+        assert_eq!(
+            harness.undelivered(),
+            2,
+            "nothing is read after the last step"
+        );
+        let mut world = World::new(&scenario);
+        for (k, truth) in truths.iter().enumerate() {
+            let end = (k == 3).then_some(EndReason::Ticks);
+            let mut expected: Box<Truth> = bytemuck::zeroed_box();
+            world.write_step(&mut expected, 0, end);
+            let mut published = truth.clone();
+            published.cmd_latency_ns = 0;
+            assert_eq!(truth.header.tick, k as u64);
+            assert!(same_payload(&*expected, &*published), "truth at {k}");
+            assert_eq!(ticks[k].flags == TICK_END, k == 3);
+            assert_eq!(truth.flags & TRUTH_END != 0, k == 3);
+            world.step(0.2 * k as f64, 0.5);
+        }
+    }
 }

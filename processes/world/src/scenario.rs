@@ -442,6 +442,14 @@ impl Scenario {
             .map(Some)
     }
 
+    /// The `world/map` message of this scenario (header zero), boxed: it is too large for the
+    /// stack.
+    pub fn world_map(&self) -> Box<WorldMap> {
+        let mut map: Box<WorldMap> = bytemuck::zeroed_box();
+        self.write_world_map(&mut map);
+        map
+    }
+
     /// Fills every field of the `world/map` message except `header`, in place.
     pub fn write_world_map(&self, map: &mut WorldMap) {
         map.arena_width = self.arena_width;
@@ -871,6 +879,17 @@ fn locate(root: &DeValue<'_>, path: &str) -> Option<usize> {
 // ---------------------------------------------------------------------------------------------
 // Loading
 // ---------------------------------------------------------------------------------------------
+
+/// The folder of the scenarios that ship with mole (`scenarios/` at the repository's root).
+pub fn bundled_scenarios() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios")
+}
+
+/// A scenario that ships with mole, by its file's stem (`default`, `slam_loop`…): for tests and
+/// benchmarks.
+pub fn bundled_scenario(name: &str) -> Result<Scenario, ScenarioError> {
+    load_scenario(&bundled_scenarios().join(format!("{name}.toml")))
+}
 
 /// Reads and validates a scenario file.
 pub fn load_scenario(path: &Path) -> Result<Scenario, ScenarioError> {

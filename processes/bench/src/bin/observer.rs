@@ -17,11 +17,9 @@ use std::time::Duration;
 /// Wake at least this often even when no step closes (a stalled stack, the end of a run).
 const PERIOD: Duration = Duration::from_millis(200);
 
+/// an observer that reads every topic of the stack (cost measurements)
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole-observer",
-    about = "an observer that reads every topic of the stack (cost measurements)"
-)]
+#[command(name = "mole-observer")]
 struct Args {
     #[command(flatten)]
     common: CommonArgs,

@@ -36,7 +36,7 @@ pub use fastslam::{FastSlam, FastSlamConfig};
 pub use map_nees::mean_nees_dof;
 pub use peer::{
     DEFAULT_FUSE_EVERY, FUSING_ESTIMATOR, FusionTotals, PEER_LANDMARKS, PeerArgs, PeerFusion,
-    PeerRefused, check_peer,
+    PeerLink, PeerRefused, check_peer,
 };
 
 use crate::kalman::KalmanError;

@@ -13,6 +13,7 @@
 
 use crate::Estimator;
 use crate::slam::FuseReport;
+use mole_runtime::{BadInput, In, Process, Publisher, RuntimeError, Step};
 use mole_types::{EstimatorKind, Landmarks};
 use thiserror::Error;
 
@@ -161,6 +162,75 @@ impl PeerFusion {
             refused = t.refused,
             "peer fusion totals"
         );
+    }
+}
+
+/// A robot's link to its peer (`--peer`): the peer's offered landmark map read each step and
+/// fused by [`PeerFusion`], this robot's map offered after each step. Without `--peer` it does
+/// nothing.
+pub struct PeerLink {
+    link: Option<Link>,
+}
+
+struct Link {
+    peer: String,
+    offered: In<Landmarks>,
+    offer_out: Publisher<Landmarks>,
+    fusion: PeerFusion,
+}
+
+impl PeerLink {
+    /// The link `args` ask for, opened on `p`'s ports. A peer refused ([`PeerArgs::checked`])
+    /// is bad input.
+    pub fn open(
+        p: &mut Process,
+        args: &PeerArgs,
+        kind: EstimatorKind,
+        own: &str,
+    ) -> Result<PeerLink, Box<dyn std::error::Error>> {
+        let Some(peer) = args
+            .checked(kind, own)
+            .map_err(|e| BadInput(e.to_string()))?
+        else {
+            return Ok(PeerLink { link: None });
+        };
+        let link = Link {
+            offered: p.peer_input(peer, PEER_LANDMARKS)?,
+            offer_out: p.peer_output(PEER_LANDMARKS)?,
+            peer: peer.to_string(),
+            fusion: PeerFusion::new(args.fuse_every),
+        };
+        Ok(PeerLink { link: Some(link) })
+    }
+
+    /// Before the step's estimate is published: fuses the peer's newest map when a round is due.
+    pub fn fuse(&mut self, step: &Step, estimator: &mut dyn Estimator) {
+        if let Some(link) = self.link.as_mut() {
+            link.fusion
+                .step(step.tick(), step.get(link.offered), estimator);
+        }
+    }
+
+    /// After it: offers this robot's map of step `k`.
+    pub fn offer(
+        &mut self,
+        k: u64,
+        origin: u64,
+        estimator: &dyn Estimator,
+    ) -> Result<(), RuntimeError> {
+        match self.link.as_mut() {
+            Some(link) => link
+                .offer_out
+                .publish(k, origin, |out| _ = estimator.write_landmarks(out)),
+            None => Ok(()),
+        }
+    }
+
+    /// Logs what the fusions did, at the end of the run.
+    pub fn log_totals(&self) {
+        if let Some(link) = &self.link {
+            link.fusion.log_totals(&link.peer);
+        }
     }
 }
 

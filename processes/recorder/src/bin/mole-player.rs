@@ -16,11 +16,9 @@ use mole_runtime::{CommonArgs, Context, Wake};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// mole's player: a recording's roles played back into a live stack
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole-player",
-    about = "mole's player: a recording's roles played back into a live stack"
-)]
+#[command(name = "mole-player")]
 struct Args {
     /// The recording (`mole up --record FILE`).
     file: PathBuf,
