@@ -224,16 +224,7 @@ fn a_killed_launcher_leaves_no_child_behind_and_a_new_stack_in_its_namespace_cle
     drop(stack);
 
     let again = Stack::start_in(&namespace, &["--mode", "lockstep", "--ticks", "300"]);
-    let keep = again.out.with_extension("kept");
-    let output = again.wait_and_copy(&keep, Duration::from_secs(120));
-    let logs = logs(&keep);
-    let summary = summary(&keep);
-    let _ = std::fs::remove_dir_all(&keep);
-    assert!(
-        output.status.success(),
-        "{}\n{logs}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let summary = again.succeeded(Duration::from_secs(120));
     assert_eq!(summary.exit_reason, EndReason::Ticks.name(), "{summary:#?}");
     assert!(processes_of(&namespace).is_empty());
     assert_eq!(
@@ -394,15 +385,7 @@ fn other_user_probe() {
     });
     println!("{PROBE_MARK} ran as uid {}", nix::unistd::getuid());
     let join = || {
-        let args = CommonArgs {
-            namespace: namespace.clone(),
-            mode: ClockMode::Realtime,
-            rate_hz: 100.0,
-            seed: None,
-            takeover: false,
-            resume: None,
-            settings: None,
-        };
+        let args = CommonArgs::attach(&namespace, ClockMode::Realtime);
         let shutdown = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         Context::with_shutdown_flag("intruder", &args, shutdown)
             .map_err(|e| format!("joining the namespace: {e}"))

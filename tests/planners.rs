@@ -9,19 +9,7 @@ use std::time::Duration;
 
 fn run(test: &str, args: &[&str]) -> Summary {
     let _serial = serial();
-    let stack = Stack::start(test, args);
-    let out = stack.out.clone();
-    let keep = out.with_extension("kept");
-    let output = stack.wait_and_copy(&keep, Duration::from_secs(600));
-    let logs = logs(&keep);
-    let summary = summary(&keep);
-    let _ = std::fs::remove_dir_all(&keep);
-    assert!(
-        output.status.success(),
-        "{}\n{logs}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    summary
+    Stack::start(test, args).succeeded(Duration::from_secs(600))
 }
 
 /// DWA drives through the cluttered field to its goal and never touches an obstacle.

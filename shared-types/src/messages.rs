@@ -156,6 +156,21 @@ impl WorldMap {
     pub fn beacons(&self) -> &[BeaconSite] {
         &self.beacons[..(self.n_beacons as usize).min(MAX_BEACONS)]
     }
+
+    /// Places beacons at `sites`, ids 0, 1, … in order (at most [`MAX_BEACONS`]); the others
+    /// are gone.
+    pub fn place_beacons(&mut self, sites: &[(f64, f64)]) {
+        let n = sites.len().min(MAX_BEACONS);
+        for (id, (slot, &(x, y))) in self.beacons.iter_mut().zip(&sites[..n]).enumerate() {
+            *slot = BeaconSite {
+                x,
+                y,
+                id: id as u32,
+                _pad: 0,
+            };
+        }
+        self.n_beacons = n as u32;
+    }
 }
 
 impl WorldMap {

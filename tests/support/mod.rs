@@ -195,6 +195,21 @@ impl Stack {
         output
     }
 
+    /// Waits for the run to end, and requires that it succeeded: its summary, or a panic with
+    /// its stderr and the tail of every log.
+    pub fn succeeded(self, timeout: Duration) -> Summary {
+        let keep = self.out.with_extension("kept");
+        let output = self.wait_and_copy(&keep, timeout);
+        let (logs, summary) = (logs(&keep), summary(&keep));
+        let _ = std::fs::remove_dir_all(&keep);
+        assert!(
+            output.status.success(),
+            "{}\n{logs}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        summary
+    }
+
     /// Waits until a role's log contains `needle`.
     pub fn wait_for_log(&self, role: &str, needle: &str, timeout: Duration) {
         let path = self.out.join("logs").join(format!("{role}.log"));

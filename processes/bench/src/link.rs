@@ -123,15 +123,7 @@ pub(crate) fn with_runtime<M: BenchMessage, T>(
     wake: WakeMode,
     f: impl FnOnce(&mut dyn Link) -> Result<T, BenchError>,
 ) -> Result<T, BenchError> {
-    let args = CommonArgs {
-        namespace: namespace.to_string(),
-        mode: ClockMode::Realtime,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    };
+    let args = CommonArgs::attach(namespace, ClockMode::Realtime);
     let mut ctx = Context::with_shutdown_flag(role, &args, Arc::new(AtomicBool::new(false)))?;
     let data_out = ports
         .data_out

@@ -127,15 +127,10 @@ mod tests {
     /// through the runtime, the others as its inputs.
     #[test]
     fn an_observer_subscribes_to_every_topic() {
-        let args = CommonArgs {
-            namespace: format!("observer-test-{}", std::process::id()),
-            mode: mole_runtime::ClockMode::Realtime,
-            rate_hz: 100.0,
-            seed: None,
-            takeover: false,
-            resume: None,
-            settings: None,
-        };
+        let args = CommonArgs::attach(
+            &format!("observer-test-{}", std::process::id()),
+            mole_runtime::ClockMode::Realtime,
+        );
         let shutdown = Arc::new(AtomicBool::new(false));
         let mut process = Process::with_shutdown_flag("observer-1", &args, shutdown).unwrap();
         let every = EveryTopic::subscribe(&mut process).unwrap();

@@ -5,7 +5,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use mole_localization::pf::{ParticleFilter, PfConfig};
 use mole_localization::{BayesConfig, Ekf, Estimator, HistogramFilter, Readings};
-use mole_types::{BeaconReading, BeaconSite, Beacons, Fix, Odom, WorldMap};
+use mole_types::{BeaconReading, Beacons, Fix, Odom, WorldMap};
 use std::hint::black_box;
 
 fn map(width: f64) -> Box<WorldMap> {
@@ -22,23 +22,12 @@ fn map(width: f64) -> Box<WorldMap> {
     m.sensors.beacon_bearing_std = 0.02;
     m.sensors.fix_std = 0.5;
     let w = width;
-    for (i, &(x, y)) in [
+    m.place_beacons(&[
         (0.1 * w, 0.1 * w),
         (0.9 * w, 0.1 * w),
         (0.9 * w, 0.9 * w),
         (0.1 * w, 0.9 * w),
-    ]
-    .iter()
-    .enumerate()
-    {
-        m.beacons[i] = BeaconSite {
-            x,
-            y,
-            id: i as u32,
-            _pad: 0,
-        };
-    }
-    m.n_beacons = 4;
+    ]);
     m
 }
 

@@ -10,7 +10,7 @@ use mole_localization::kf::KalmanFilter;
 use mole_localization::models::unicycle_g;
 use mole_localization::{Ekf, Estimator, Readings};
 use mole_sensing::Sensing;
-use mole_types::{BeaconSite, Beacons, Fix, Odom, Truth, WorldMap, wrap_angle};
+use mole_types::{Beacons, Fix, Odom, Truth, WorldMap, wrap_angle};
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Matrix4x2, Vector2, Vector3, Vector4};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -52,18 +52,7 @@ fn world(seed: u64) -> Box<WorldMap> {
     s.beacon_bearing_std = 0.02;
     s.fix_std = 0.5;
     s.fix_period_ticks = 20;
-    for (i, &(x, y)) in [(1.0, 1.0), (9.0, 1.0), (9.0, 9.0), (1.0, 9.0)]
-        .iter()
-        .enumerate()
-    {
-        m.beacons[i] = BeaconSite {
-            x,
-            y,
-            id: i as u32,
-            _pad: 0,
-        };
-    }
-    m.n_beacons = 4;
+    m.place_beacons(&[(1.0, 1.0), (9.0, 1.0), (9.0, 9.0), (1.0, 9.0)]);
     m
 }
 

@@ -10,7 +10,7 @@ use mole_localization::{
     HistogramFilter, Kf, ParticleFilter, PfConfig, Readings,
 };
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, Fix, Landmarks, Message, Odom, Particles, Pose, WorldMap,
+    BeaconReading, Beacons, Fix, Landmarks, Message, Odom, Particles, Pose, WorldMap,
 };
 use proptest::prelude::*;
 
@@ -30,19 +30,7 @@ fn map() -> Box<WorldMap> {
     m.sensors.beacon_range_std = 0.05;
     m.sensors.beacon_bearing_std = 0.02;
     m.sensors.fix_std = 0.3;
-    m.beacons[0] = BeaconSite {
-        x: 0.5,
-        y: 2.5,
-        id: 0,
-        _pad: 0,
-    };
-    m.beacons[1] = BeaconSite {
-        x: 3.5,
-        y: 0.5,
-        id: 1,
-        _pad: 0,
-    };
-    m.n_beacons = 2;
+    m.place_beacons(&[(0.5, 2.5), (3.5, 0.5)]);
     m
 }
 

@@ -5,8 +5,7 @@
 use mole_localization::{Estimator, EstimatorKind, GraphSlamEstimator, Readings};
 use mole_runtime::{CountingAllocator, allocations_during};
 use mole_types::{
-    BeaconReading, BeaconSite, Beacons, Fix, LANDMARK_ANONYMOUS, Landmarks, Odom, Trajectory,
-    WorldMap,
+    BeaconReading, Beacons, Fix, LANDMARK_ANONYMOUS, Landmarks, Odom, Trajectory, WorldMap,
 };
 
 #[global_allocator]
@@ -31,15 +30,7 @@ fn map() -> Box<WorldMap> {
     m.sensors.beacon_range_std = 0.05;
     m.sensors.beacon_bearing_std = 0.02;
     m.sensors.fix_std = 0.5;
-    for (i, &(x, y)) in BEACONS.iter().enumerate() {
-        m.beacons[i] = BeaconSite {
-            x,
-            y,
-            id: i as u32,
-            _pad: 0,
-        };
-    }
-    m.n_beacons = BEACONS.len() as u32;
+    m.place_beacons(&BEACONS);
     m
 }
 

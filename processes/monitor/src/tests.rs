@@ -929,15 +929,7 @@ fn max_grid_cells_worlds_build_quickly() {
 /// The walled world with three beacons: b0 (1, 1), b1 (3, 1), b2 (2, 1.8).
 fn beacon_world() -> Box<WorldMap> {
     let mut map = walled_world(0.1);
-    for (i, (x, y)) in [(1.0, 1.0), (3.0, 1.0), (2.0, 1.8)].into_iter().enumerate() {
-        map.beacons[i] = mole_types::BeaconSite {
-            x,
-            y,
-            id: i as u32,
-            _pad: 0,
-        };
-    }
-    map.n_beacons = 3;
+    map.place_beacons(&[(1.0, 1.0), (3.0, 1.0), (2.0, 1.8)]);
     map
 }
 

@@ -5,15 +5,17 @@
 //! the planner's own work), frontier exploration covers the maze without touching a wall, APF in
 //! the U-trap reports a stall instead of spinning forever.
 
+#[allow(dead_code)] // tests/sim serves several tests; this one uses `coverage` alone.
+mod sim;
+
 use mole_mapping::FrontierGrid;
 use mole_planning::{
     Command, Dwa, DwaConfig, Limited, Planner, PlannerConfig, PlannerInput, RobotLimits,
     build_planner,
 };
 use mole_sensing::RayCaster;
-use mole_types::{Grid, MODE_DONE, MODE_ESCAPE, MODE_STALLED, PlannerKind, Scan, Square, Tactile};
+use mole_types::{Grid, MODE_DONE, MODE_ESCAPE, MODE_STALLED, PlannerKind, Scan, Tactile};
 use mole_world::{Scenario, World, load_scenario};
-use std::path::Path;
 
 const DT: f64 = 0.05;
 const BEAMS: usize = 180;
@@ -21,9 +23,7 @@ const RANGE_MAX: f64 = 4.0;
 
 /// Scenario `name` from scenarios/, stepped at [`DT`].
 fn scenario(name: &str) -> Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenarios")
-        .join(name);
+    let path = mole_world::bundled_scenarios().join(name);
     let mut s = load_scenario(&path).unwrap_or_else(|e| panic!("{e}"));
     s.dt = DT;
     s
@@ -38,47 +38,6 @@ struct Run {
     coverage: f64,
     modes: Vec<u32>,
     path_length: f64,
-}
-
-/// Whether (x, y) lies inside any of the squares.
-fn inside(obstacles: &[Square], x: f64, y: f64) -> bool {
-    obstacles.iter().any(|o| o.contains(x, y))
-}
-
-/// Fraction of the free cells reachable from the start (8-connected over cell centres outside
-/// every square) that the frontier grid marks explored.
-fn coverage(sc: &Scenario, cells: &[u8], w: usize, h: usize) -> f64 {
-    let res = sc.grid_resolution;
-    let free: Vec<bool> = (0..w * h)
-        .map(|i| {
-            let (x, y) = (((i % w) as f64 + 0.5) * res, ((i / w) as f64 + 0.5) * res);
-            !inside(&sc.obstacles, x, y)
-        })
-        .collect();
-    let start = (sc.start.y / res) as usize * w + (sc.start.x / res) as usize;
-    let mut seen = vec![false; w * h];
-    let mut stack = vec![start];
-    seen[start] = true;
-    let (mut total, mut explored) = (0usize, 0usize);
-    while let Some(c) = stack.pop() {
-        total += 1;
-        explored += (cells[c] != 0) as usize;
-        let (cx, cy) = ((c % w) as i64, (c / w) as i64);
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let (nx, ny) = (cx + dx, cy + dy);
-                if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
-                    continue;
-                }
-                let n = ny as usize * w + nx as usize;
-                if free[n] && !seen[n] {
-                    seen[n] = true;
-                    stack.push(n);
-                }
-            }
-        }
-    }
-    explored as f64 / total as f64
 }
 
 /// Runs `planner` on the world of `sc` with a noise-free lidar and the frontier grid for up to
@@ -148,7 +107,7 @@ fn run(sc: &Scenario, planner: &mut dyn Planner, max_steps: usize, stop_at_goal:
             break;
         }
     }
-    out.coverage = coverage(sc, grid.cells(), grid.width as usize, grid.height as usize);
+    out.coverage = sim::coverage(sc, grid.cells(), grid.width as usize, grid.height as usize);
     out
 }
 

@@ -11,15 +11,7 @@ fn main() {
         .unwrap_or("realtime".into())
         .parse()
         .unwrap();
-    let args = CommonArgs {
-        namespace: format!("pp-{}", std::process::id()),
-        mode,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    };
+    let args = CommonArgs::attach(&format!("pp-{}", std::process::id()), mode);
     let a2 = args.clone();
     let echo = std::thread::spawn(move || {
         let mut ctx =

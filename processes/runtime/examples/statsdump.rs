@@ -12,15 +12,7 @@ fn main() {
         .unwrap_or("realtime".into())
         .parse()
         .unwrap();
-    let args = CommonArgs {
-        namespace: ns,
-        mode,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    };
+    let args = CommonArgs::attach(&ns, mode);
     let ctx =
         Context::with_shutdown_flag("statsdump", &args, Arc::new(AtomicBool::new(false))).unwrap();
     let mut sub = ctx.subscriber(topics::STACK_STATS).unwrap();

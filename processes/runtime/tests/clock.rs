@@ -8,15 +8,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 fn args(test: &str) -> CommonArgs {
-    CommonArgs {
-        namespace: format!("rt-clock-{test}-{}", std::process::id()),
-        mode: ClockMode::Lockstep,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    }
+    CommonArgs::attach(
+        &format!("rt-clock-{test}-{}", std::process::id()),
+        ClockMode::Lockstep,
+    )
 }
 
 /// A process swapped in while the clock waits for a reply (its predecessor gone) is handed the

@@ -83,15 +83,7 @@ fn publish_wait_receive_allocates_nothing_per_step() {
     assert!(boxed >= 1, "a Box was allocated, the counter saw {boxed}");
 
     for mode in [ClockMode::Realtime, ClockMode::Lockstep] {
-        let args = CommonArgs {
-            namespace: format!("rt-no-alloc-{mode}-{}", std::process::id()),
-            mode,
-            rate_hz: 100.0,
-            seed: None,
-            takeover: false,
-            resume: None,
-            settings: None,
-        };
+        let args = CommonArgs::attach(&format!("rt-no-alloc-{mode}-{}", std::process::id()), mode);
         // Planner and world close the loop: command out, odometry back.
         let mut planner = context("planner", &args);
         let mut world = context("world", &args);

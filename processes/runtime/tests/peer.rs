@@ -20,15 +20,10 @@ type Seen = (u64, Option<u64>);
 
 /// Lockstep arguments of robot `robot` in test `test`.
 fn args(test: &str, robot: &str) -> CommonArgs {
-    CommonArgs {
-        namespace: format!("rt-peer-{test}-{robot}-{}", std::process::id()),
-        mode: ClockMode::Lockstep,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    }
+    CommonArgs::attach(
+        &format!("rt-peer-{test}-{robot}-{}", std::process::id()),
+        ClockMode::Lockstep,
+    )
 }
 
 /// A context of robot `args`, for publishing by hand.

@@ -9,15 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 fn args(test: &str, mode: ClockMode) -> CommonArgs {
-    CommonArgs {
-        namespace: format!("rt-{test}-{}", std::process::id()),
-        mode,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    }
+    CommonArgs::attach(&format!("rt-{test}-{}", std::process::id()), mode)
 }
 
 fn context(role: &str, args: &CommonArgs) -> Context {

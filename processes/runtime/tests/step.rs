@@ -14,15 +14,7 @@ use std::time::Duration;
 type Seen = (u64, Option<u64>, Option<u64>, Option<u64>);
 
 fn args(test: &str, mode: ClockMode) -> CommonArgs {
-    CommonArgs {
-        namespace: format!("rt-step-{test}-{}", std::process::id()),
-        mode,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    }
+    CommonArgs::attach(&format!("rt-step-{test}-{}", std::process::id()), mode)
 }
 
 /// A process like planning: odom triggers (by `order`), the fix is the same tick, the grid the

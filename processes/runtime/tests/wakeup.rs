@@ -17,15 +17,7 @@ use std::time::{Duration, Instant};
 const NO_HANG: Duration = Duration::from_secs(10);
 
 fn args(test: &str, mode: ClockMode) -> CommonArgs {
-    CommonArgs {
-        namespace: format!("rt-wake-{test}-{}", std::process::id()),
-        mode,
-        rate_hz: 100.0,
-        seed: None,
-        takeover: false,
-        resume: None,
-        settings: None,
-    }
+    CommonArgs::attach(&format!("rt-wake-{test}-{}", std::process::id()), mode)
 }
 
 fn context(role: &str, args: &CommonArgs) -> Context {

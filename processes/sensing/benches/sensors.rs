@@ -4,16 +4,12 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use mole_sensing::{RayCaster, Sensing};
 use mole_types::*;
 use std::hint::black_box;
-use std::path::Path;
 
 fn scenario_map(name: &str) -> Box<WorldMap> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenarios")
-        .join(name);
-    let scenario = mole_world::load_scenario(&path).expect("scenario");
-    let mut map: Box<WorldMap> = bytemuck::zeroed_box();
-    scenario.write_world_map(&mut map);
-    map
+    let name = name.trim_end_matches(".toml");
+    mole_world::bundled_scenario(name)
+        .expect("scenario")
+        .world_map()
 }
 
 fn benches(c: &mut Criterion) {

@@ -462,15 +462,7 @@ fn fix_is_valid_on_its_period_only() {
 fn beacon_map() -> Box<WorldMap> {
     let mut m = with_squares(map(), &[Square::new(5.0, 5.0, 2.0)]);
     let sites = [(8.0, 5.0), (2.0, 8.0), (2.0, 9.9), (5.0, 7.0), (4.0, 5.0)];
-    for (i, (x, y)) in sites.into_iter().enumerate() {
-        m.beacons[i] = BeaconSite {
-            x,
-            y,
-            id: i as u32,
-            _pad: 0,
-        };
-    }
-    m.n_beacons = sites.len() as u32;
+    m.place_beacons(&sites);
     m.sensors.beacon_range_max = 4.0;
     m
 }

@@ -2,7 +2,7 @@
 //! scenario, in the cluttered one, and through a maze of 1024 squares.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use mole_world::{World, load_scenario, parse_scenario};
+use mole_world::{World, parse_scenario};
 use std::hint::black_box;
 use std::path::Path;
 
@@ -34,10 +34,8 @@ fn bench_steps(c: &mut Criterion, name: &str, mut world: World) {
 }
 
 fn benches(c: &mut Criterion) {
-    let scenarios = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
     for name in ["open", "cluttered"] {
-        let s = load_scenario(&scenarios.join(format!("{name}.toml")))
-            .unwrap_or_else(|e| panic!("{e}"));
+        let s = mole_world::bundled_scenario(name).unwrap_or_else(|e| panic!("{e}"));
         bench_steps(c, &format!("step_{name}"), World::new(&s));
     }
     let maze = parse_scenario(&lattice_maze(), Path::new("lattice.toml"))

@@ -314,7 +314,7 @@ mod tests {
     use std::path::{Path, PathBuf};
 
     fn scenarios_dir() -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios")
+        crate::scenario::bundled_scenarios()
     }
 
     #[test]

@@ -771,8 +771,7 @@ mod tests {
     }
 
     fn cluttered() -> Scenario {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/cluttered.toml");
-        match crate::scenario::load_scenario(&path) {
+        match crate::scenario::bundled_scenario("cluttered") {
             Ok(s) => s,
             Err(e) => panic!("{e}"),
         }

@@ -7,7 +7,7 @@ pub mod ring;
 
 use mole_localization::NoiseModel;
 use mole_localization::models::unicycle_g;
-use mole_types::{BeaconReading, BeaconSite, Beacons, Odom, WorldMap, wrap_angle};
+use mole_types::{BeaconReading, Beacons, Odom, WorldMap, wrap_angle};
 use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -129,15 +129,7 @@ pub fn world_map(seed: u64, beacons: &[(f64, f64)]) -> Box<WorldMap> {
     (s.odom_v_std, s.odom_omega_std) = (n.odom_v_std, n.odom_omega_std);
     (s.beacon_range_std, s.beacon_bearing_std) = (n.beacon_range_std, n.beacon_bearing_std);
     (s.beacon_range_max, s.fix_std) = (SENSOR_RANGE, n.fix_std);
-    for (i, &(x, y)) in beacons.iter().enumerate() {
-        m.beacons[i] = BeaconSite {
-            x,
-            y,
-            id: i as u32,
-            _pad: 0,
-        };
-    }
-    m.n_beacons = beacons.len() as u32;
+    m.place_beacons(beacons);
     m
 }
 

@@ -9,13 +9,10 @@ use mole_sensing::Sensing;
 use mole_types::{Grid, Scan, Tactile, Truth, WorldMap};
 use mole_world::{Scenario, World, load_scenario};
 use std::hash::{DefaultHasher, Hash, Hasher};
-use std::path::Path;
 
 /// Scenario `name` from scenarios/, at its own Δt, with `seed`.
 pub fn scenario(name: &str, seed: u64) -> Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenarios")
-        .join(name);
+    let path = mole_world::bundled_scenarios().join(name);
     let mut s = load_scenario(&path).unwrap_or_else(|e| panic!("{e}"));
     s.seed = seed;
     s
@@ -104,6 +101,25 @@ pub fn run(
     out.commands = hasher.finish();
     out.coverage = coverage(sc, grid.cells(), grid.width as usize, grid.height as usize);
     out
+}
+
+/// The `dwa` stack on scenario `name` (its goal, `seed`) until it reports arriving, for up to
+/// 12,000 steps.
+pub fn dwa_to_the_goal(name: &str, seed: u64) -> Outcome {
+    use mole_planning::{PlannerConfig, RobotLimits, build_planner};
+    let sc = scenario(name, seed);
+    let goal = sc.goal.unwrap_or_else(|| panic!("{name} has a goal"));
+    let config = PlannerConfig {
+        seed,
+        goal: Some((goal.x, goal.y)),
+        goal_tolerance: Some(goal.tolerance),
+        ..PlannerConfig::new(mole_types::PlannerKind::Dwa)
+    };
+    let mut p =
+        build_planner(&config, RobotLimits::from(&sc.robot)).unwrap_or_else(|e| panic!("{e}"));
+    run(&sc, p.as_mut(), 12_000, |c| {
+        c.mode == mole_types::MODE_ARRIVED
+    })
 }
 
 /// Share of the free cells reachable from the start (8-connected over cell centres outside
