@@ -5,7 +5,9 @@
 //! holds; what is not a recording is refused.
 
 use mole_integration_tests::*;
-use mole_types::{EstimatorKind, Grid, Truth, topics};
+use mole_types::{
+    Cmd, EstimatorKind, Grid, Landmarks, Odom, Particles, Pose, Scan, Truth, WorldMap, topics,
+};
 use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -65,12 +67,18 @@ fn recorded(path: &Path, topic: &str) -> Vec<(u64, Vec<u8>)> {
 /// Exports the recording `run.mcap` of `run` into `foxglove.mcap` beside it with `mole export
 /// --foxglove`, which must succeed: (recording, export).
 fn exported(run: &Kept) -> (PathBuf, PathBuf) {
-    let (recording, export) = (run.0.join("run.mcap"), run.0.join("foxglove.mcap"));
+    exported_as(run, "--foxglove")
+}
+
+/// As [`exported`], with `mole export`'s `target` (`--foxglove`, `--ros2`), into `<target>.mcap`.
+fn exported_as(run: &Kept, target: &str) -> (PathBuf, PathBuf) {
+    let name = format!("{}.mcap", target.trim_start_matches('-'));
+    let (recording, export) = (run.0.join("run.mcap"), run.0.join(name));
     let output = run_mole(&[
         "export",
         &recording.display().to_string(),
         &export.display().to_string(),
-        "--foxglove",
+        target,
     ]);
     assert!(
         output.status.success(),
@@ -324,4 +332,274 @@ fn a_file_that_is_not_a_recording_is_refused() {
     assert!(error.contains("not an MCAP file"), "{error}");
     assert!(error.contains("expected a recording"), "{error}");
     assert!(!out.exists(), "an output file was left");
+}
+
+/// Reads the ROS 2 export `argv[1]` knowing only ROS 2's message definitions, through
+/// mcap-ros2-support's CDR decoder: the file's profile, every channel's schema, encodings, QoS
+/// metadata and message count, what each stamped channel holds at the stamp `argv[2]`.`argv[3]`,
+/// every `/cmd_vel`, the `/tf` frame pairs, the last `/map` and the last `/landmarks`.
+const READ_ROS2: &str = r#"
+import json, math, sys
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+path, sec, nsec = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+r = repr
+def yaw(q):
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y ** 2 + q.z ** 2))
+def planar(p):
+    return [r(p.position.x), r(p.position.y), r(yaw(p.orientation))]
+channels, at, cmds, frames, grid, markers = {}, {}, [], set(), None, None
+with open(path, "rb") as f:
+    reader = make_reader(f, decoder_factories=[DecoderFactory()])
+    profile = reader.get_header().profile
+    for schema, channel, message, m in reader.iter_decoded_messages():
+        t = channel.topic
+        seen = channels.setdefault(t, [schema.name, schema.encoding, channel.message_encoding,
+                                       "offered_qos_profiles" in channel.metadata, 0])
+        seen[4] += 1
+        if t == "/cmd_vel":
+            cmds.append([r(m.linear.x), r(m.angular.z)])
+            continue
+        if t == "/tf":
+            for tr in m.transforms:
+                frames.add(tr.header.frame_id + ">" + tr.child_frame_id)
+                s = tr.header.stamp
+                if (s.sec, s.nanosec) == (sec, nsec) and tr.child_frame_id == "base_link":
+                    v = tr.transform.translation
+                    at["/tf"] = [r(v.x), r(v.y), r(yaw(tr.transform.rotation))]
+            continue
+        if t == "/map":
+            counts = {str(v): list(m.data).count(v) for v in (-1, 0, 100)}
+            grid = [m.info.width, m.info.height, r(m.info.resolution), counts]
+        if t == "/landmarks":
+            markers = [[k.action, k.id, r(k.pose.position.x), r(k.pose.position.y)]
+                       for k in m.markers]
+            continue
+        s = m.header.stamp
+        if (s.sec, s.nanosec) != (sec, nsec):
+            continue
+        if t == "/truth":
+            at[t] = planar(m.pose) + [m.header.frame_id]
+        elif t == "/pose":
+            at[t] = planar(m.pose.pose) + [[r(c) for c in m.pose.covariance]]
+        elif t == "/odom":
+            tw = m.twist.twist
+            at[t] = planar(m.pose.pose) + [r(tw.linear.x), r(tw.angular.z), m.header.frame_id,
+                                           m.child_frame_id]
+        elif t == "/scan":
+            at[t] = [r(m.angle_min), r(m.angle_increment), r(m.range_max),
+                     [r(x) for x in m.ranges]]
+        elif t == "/particles":
+            at[t] = [len(m.poses)] + planar(m.poses[0])
+print(json.dumps({"profile": profile, "channels": channels, "at": at, "cmds": cmds,
+                  "frames": sorted(frames), "grid": grid, "markers": markers}))
+"#;
+
+/// The newest recorded sample of `topic` at `tick`, as its message.
+fn at_tick<M: bytemuck::Pod + mole_types::Message>(path: &Path, topic: &str, tick: u64) -> M {
+    recorded(path, topic)
+        .into_iter()
+        .map(|(_, data)| bytemuck::pod_read_unaligned::<M>(&data))
+        .find(|m| m.header().tick == tick)
+        .unwrap_or_else(|| panic!("no recorded {topic} at {tick}"))
+}
+
+/// A recorded run exported with `mole export --ros2` is a ROS 2 bag that mcap-ros2-support
+/// decodes in full: the `ros2` profile, `ros2msg` schemas with the QoS rosbag2 needs, CDR
+/// messages stamped with the simulated time of their step, holding the recorded values (the
+/// truth, the estimate and its covariance, odometry and its transform, every range of the scan,
+/// every command, the particles, the landmarks and the last frontier grid, cell by cell).
+#[test]
+fn a_ros2_export_decodes_with_the_recorded_values() {
+    let test = "a_ros2_export_decodes_with_the_recorded_values";
+    let python = match python_with_mcap_ros2() {
+        Ok(python) => python,
+        Err(reason) => return skip(test, &reason),
+    };
+    let _serial = serial();
+    for estimator in [EstimatorKind::Pf, EstimatorKind::EkfSlam] {
+        let args = ["--estimator", estimator.name(), "--planner", "frontier"];
+        let run = recorded_lockstep_run(&format!("export-ros2-{estimator}"), 200, &args);
+        let (recording, export) = exported_as(&run, "--ros2");
+        let (_, map) = recorded(&recording, topics::WORLD_MAP.name).remove(0);
+        let dt_ns = (bytemuck::pod_read_unaligned::<WorldMap>(&map).dt * 1e9).round() as u64;
+        let ns = TICK * dt_ns;
+        let read = Command::new(&python)
+            .args(["-c", READ_ROS2, &export.display().to_string()])
+            .args([
+                (ns / 1_000_000_000).to_string(),
+                (ns % 1_000_000_000).to_string(),
+            ])
+            .output()
+            .expect("run python");
+        let stdout = String::from_utf8_lossy(&read.stdout);
+        assert!(
+            read.status.success(),
+            "{estimator}: {stdout}\n{}",
+            String::from_utf8_lossy(&read.stderr)
+        );
+        let d: serde_json::Value = serde_json::from_str(stdout.trim())
+            .unwrap_or_else(|e| panic!("python printed no JSON ({e}): {stdout}"));
+        let at = &d["at"];
+        let number = |v: &serde_json::Value| -> f64 {
+            let text = v.as_str().unwrap_or_default();
+            text.parse()
+                .unwrap_or_else(|_| panic!("`{text}` is not a number: {d}"))
+        };
+        let same_yaw = |a: f64, b: f64| (a - b).sin().abs() < 1e-9;
+
+        assert_eq!(d["profile"], "ros2");
+        let count = |topic: &str| recorded(&recording, topic).len() as u64;
+        let channels = d["channels"].as_object().expect("channels");
+        for (channel, ty, n) in [
+            (
+                "/truth",
+                "geometry_msgs/msg/PoseStamped",
+                count(topics::WORLD_TRUTH.name),
+            ),
+            (
+                "/pose",
+                "geometry_msgs/msg/PoseWithCovarianceStamped",
+                count(topics::LOCALIZATION_POSE.name),
+            ),
+            (
+                "/odom",
+                "nav_msgs/msg/Odometry",
+                count(topics::SENSING_ODOM.name),
+            ),
+            (
+                "/scan",
+                "sensor_msgs/msg/LaserScan",
+                count(topics::SENSING_SCAN.name),
+            ),
+            (
+                "/cmd_vel",
+                "geometry_msgs/msg/Twist",
+                count(topics::PLANNING_CMD.name),
+            ),
+            (
+                "/tf",
+                "tf2_msgs/msg/TFMessage",
+                count(topics::LOCALIZATION_POSE.name) + count(topics::SENSING_ODOM.name),
+            ),
+        ] {
+            let c = &channels[channel];
+            assert_eq!(c[0], ty, "{estimator}: {channel}: {c}");
+            assert_eq!(
+                (&c[1], &c[2], &c[3]),
+                (&"ros2msg".into(), &"cdr".into(), &true.into()),
+                "{channel}"
+            );
+            assert_eq!(c[4], n, "{estimator}: {channel}: every message decoded");
+        }
+        assert_eq!(channels["/map"][0], "nav_msgs/msg/OccupancyGrid");
+
+        let truth: Truth = at_tick(&recording, topics::WORLD_TRUTH.name, TICK);
+        let t = &at["/truth"];
+        assert_eq!(
+            (number(&t[0]), number(&t[1]), &t[3]),
+            (truth.x, truth.y, &"map".into())
+        );
+        assert!(same_yaw(number(&t[2]), truth.theta));
+
+        let pose: Pose = at_tick(&recording, topics::LOCALIZATION_POSE.name, TICK);
+        let p = &at["/pose"];
+        assert_eq!((number(&p[0]), number(&p[1])), (pose.x, pose.y));
+        assert!(same_yaw(number(&p[2]), pose.theta));
+        let cov: Vec<f64> = p[3].as_array().expect("36").iter().map(number).collect();
+        for (i, &r) in [0, 1, 5].iter().enumerate() {
+            for (j, &c) in [0, 1, 5].iter().enumerate() {
+                assert_eq!(cov[r * 6 + c], pose.covariance[i * 3 + j], "Σ[{r}][{c}]");
+            }
+        }
+
+        let odom: Odom = at_tick(&recording, topics::SENSING_ODOM.name, TICK);
+        let o = &at["/odom"];
+        assert_eq!((number(&o[0]), number(&o[1])), (odom.x, odom.y));
+        assert!(same_yaw(number(&o[2]), odom.theta));
+        assert_eq!((number(&o[3]), number(&o[4])), (odom.v, odom.omega));
+        assert_eq!((&o[5], &o[6]), (&"odom".into(), &"base_link".into()));
+        let tf = &at["/tf"];
+        assert_eq!((number(&tf[0]), number(&tf[1])), (odom.x, odom.y));
+        assert_eq!(
+            d["frames"],
+            serde_json::json!(["map>odom", "odom>base_link"])
+        );
+
+        let scan: Scan = at_tick(&recording, topics::SENSING_SCAN.name, TICK);
+        let s = &at["/scan"];
+        assert_eq!(number(&s[0]), f64::from(scan.angle_min));
+        assert_eq!(number(&s[1]), f64::from(scan.angle_increment));
+        assert_eq!(number(&s[2]), f64::from(scan.range_max));
+        let ranges: Vec<f64> = s[3]
+            .as_array()
+            .expect("ranges")
+            .iter()
+            .map(number)
+            .collect();
+        let recorded_ranges: Vec<f64> = scan.ranges().iter().map(|&r| f64::from(r)).collect();
+        assert_eq!(ranges, recorded_ranges);
+
+        let cmds: Vec<(f64, f64)> = recorded(&recording, topics::PLANNING_CMD.name)
+            .into_iter()
+            .map(|(_, data)| bytemuck::pod_read_unaligned::<Cmd>(&data))
+            .map(|c| (c.v, c.omega))
+            .collect();
+        let decoded: Vec<(f64, f64)> = d["cmds"]
+            .as_array()
+            .expect("cmds")
+            .iter()
+            .map(|c| (number(&c[0]), number(&c[1])))
+            .collect();
+        assert_eq!(decoded, cmds);
+
+        let (_, last) = recorded(&recording, topics::MAPPING_GRID.name)
+            .pop()
+            .expect("a grid");
+        let grid = bytemuck::pod_read_unaligned::<Grid>(&last);
+        let g = &d["grid"];
+        assert_eq!(
+            (g[0].as_u64(), g[1].as_u64()),
+            (Some(grid.width.into()), Some(grid.height.into()))
+        );
+        assert_eq!(number(&g[2]), f64::from(grid.resolution as f32));
+        let cells = |v: u8| grid.cells().iter().filter(|&&c| c == v).count() as u64;
+        let counts = &g[3];
+        assert_eq!(counts["-1"], cells(mole_types::CELL_UNEXPLORED), "{g}");
+        assert_eq!(counts["0"], cells(mole_types::CELL_FREE), "{g}");
+        assert_eq!(counts["100"], cells(mole_types::CELL_OCCUPIED), "{g}");
+
+        if estimator == EstimatorKind::Pf {
+            let particles: Particles =
+                at_tick(&recording, topics::LOCALIZATION_PARTICLES.name, TICK);
+            let pa = &at["/particles"];
+            assert_eq!(pa[0], particles.n_particles, "{pa}");
+            let first = particles.particles()[0];
+            assert_eq!(
+                (number(&pa[1]), number(&pa[2])),
+                (f64::from(first.x), f64::from(first.y))
+            );
+        } else {
+            let (_, last) = recorded(&recording, topics::LOCALIZATION_LANDMARKS.name)
+                .pop()
+                .expect("landmarks");
+            let landmarks = bytemuck::pod_read_unaligned::<Landmarks>(&last);
+            let markers = d["markers"].as_array().expect("markers");
+            assert!(landmarks.n_landmarks > 0, "a SLAM run maps beacons");
+            assert_eq!(
+                markers.len(),
+                landmarks.landmarks().len() + 1,
+                "DELETEALL first"
+            );
+            assert_eq!(markers[0][0], 3);
+            for (m, l) in markers[1..].iter().zip(landmarks.landmarks()) {
+                assert_eq!(
+                    (m[0].as_i64(), m[1].as_i64()),
+                    (Some(0), Some(i64::from(l.id)))
+                );
+                assert_eq!((number(&m[2]), number(&m[3])), (l.x, l.y));
+            }
+        }
+    }
 }

@@ -546,22 +546,36 @@ pub fn made_by<'a>(
 /// A Python with the `mcap` package (target/python-env first, then python3 on PATH), or why
 /// there is none.
 pub fn python_with_mcap() -> Result<String, String> {
+    python_importing("mcap.reader, lz4", "the mcap package")
+}
+
+/// A Python that also has mcap-ros2-support's CDR decoder (`scripts/python-env.sh`), or why
+/// there is none.
+pub fn python_with_mcap_ros2() -> Result<String, String> {
+    python_importing(
+        "mcap.reader, lz4, mcap_ros2.decoder",
+        "the mcap and mcap-ros2-support packages",
+    )
+}
+
+/// target/python-env's Python, else the system's, if it imports `modules`.
+fn python_importing(modules: &str, what: &str) -> Result<String, String> {
     let venv = workspace().join("target/python-env/bin/python3");
     let mut reasons = Vec::new();
     for candidate in [venv.display().to_string(), "python3".to_string()] {
         match std::process::Command::new(&candidate)
-            .args(["-c", "import mcap.reader, lz4"])
+            .args(["-c", &format!("import {modules}")])
             .output()
         {
             Err(e) => reasons.push(format!("{candidate}: {e}")),
             Ok(out) if !out.status.success() => {
-                reasons.push(format!("{candidate} cannot import mcap.reader and lz4"));
+                reasons.push(format!("{candidate} cannot import {modules}"));
             }
             Ok(_) => return Ok(candidate),
         }
     }
     Err(format!(
-        "no Python with the mcap package ({}); scripts/python-env.sh installs one",
+        "no Python with {what} ({}); scripts/python-env.sh installs one",
         reasons.join("; ")
     ))
 }

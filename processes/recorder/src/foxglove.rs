@@ -7,15 +7,12 @@
 //! the JSON messages it becomes; [`export`] streams a recording through them, one message at a
 //! time, into a new MCAP file. Every exported message keeps its source's log time.
 
-use crate::schema::SCHEMA_ENCODING;
+use crate::export::{Exporting, Format};
 use mole_types::{
     Grid, Header, Landmarks, Particles, PlanStatus, Pose, Scan, Truth, WorldMap, topics,
 };
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::{BufReader, BufWriter, Read as _};
-use std::path::{Path, PathBuf};
 
 /// The schema encoding of every exported channel.
 pub const JSON_SCHEMA_ENCODING: &str = "jsonschema";
@@ -427,204 +424,53 @@ pub fn base64(bytes: &[u8]) -> String {
     base64::engine::general_purpose::STANDARD.encode(bytes)
 }
 
-/// Why a recording cannot be exported.
-#[derive(Debug, thiserror::Error)]
-pub enum ExportError {
-    #[error("{}: cannot read: {}", .0.display(), .1)]
-    Unreadable(PathBuf, String),
-    #[error(
-        "{}: not an MCAP file (expected a recording made by `mole up --record` or `mole record`)",
-        .0.display()
-    )]
-    NotMcap(PathBuf),
-    #[error(
-        "{}: not a mole recording (expected channels of schema encoding `{SCHEMA_ENCODING}`)",
-        .0.display()
-    )]
-    NotMole(PathBuf),
-    #[error(
-        "{}: recorded with other message layouts: `{topic}` holds `{recorded}`, this build reads \
-         `{expected}`",
-        path.display()
-    )]
-    OtherLayout {
-        path: PathBuf,
-        topic: String,
-        recorded: String,
-        expected: String,
-    },
-    #[error("{}: `{topic}`: a message of {size} bytes, expected {expected}", path.display())]
-    BadSample {
-        path: PathBuf,
-        topic: String,
-        size: usize,
-        expected: usize,
-    },
-    #[error("{}: truncated or corrupt after {messages} messages: {reason}", path.display())]
-    Corrupt {
-        path: PathBuf,
-        messages: u64,
-        reason: String,
-    },
-    #[error("{}: is the recording itself; export into another file", .0.display())]
-    SameFile(PathBuf),
-    #[error("cannot write {}: {}", .0.display(), .1)]
-    Write(PathBuf, String),
-}
+/// The Foxglove export's side of [`crate::export::export`]: each converted message as JSON on a
+/// channel of its well-known schema.
+impl Format for Converter {
+    fn profile(&self) -> &'static str {
+        ""
+    }
 
-/// What an export wrote.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Exported {
-    /// Messages read from the recording.
-    pub read: u64,
-    /// Messages written, per exported channel.
-    pub written: BTreeMap<&'static str, u64>,
-}
+    fn name(&self) -> &'static str {
+        "foxglove"
+    }
 
-/// Exports the recording `input` into the new MCAP file `output` (replaced if it exists),
-/// reading and writing one message at a time. On any error `output` is removed.
-pub fn export(input: &Path, output: &Path) -> Result<Exported, ExportError> {
-    check_is_mcap(input)?;
-    if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize())
-        && a == b
-    {
-        return Err(ExportError::SameFile(output.to_path_buf()));
+    fn schema(&self, name: &str) -> (String, &'static str, Vec<u8>) {
+        let text = schemas::json_schema(name).expect("every converted message has a schema");
+        (
+            name.to_string(),
+            JSON_SCHEMA_ENCODING,
+            text.as_bytes().to_vec(),
+        )
     }
-    let result = export_into(input, output);
-    if result.is_err() {
-        let _ = std::fs::remove_file(output);
-    }
-    result
-}
 
-/// Refuses a file that does not start with MCAP's magic.
-fn check_is_mcap(input: &Path) -> Result<(), ExportError> {
-    let unreadable =
-        |e: std::io::Error| ExportError::Unreadable(input.to_path_buf(), e.to_string());
-    let mut magic = [0u8; 8];
-    let mut file = File::open(input).map_err(unreadable)?;
-    let mut got = 0;
-    while got < magic.len() {
-        match file.read(&mut magic[got..]).map_err(unreadable)? {
-            0 => break,
-            n => got += n,
-        }
+    fn message_encoding(&self) -> &'static str {
+        JSON_MESSAGE_ENCODING
     }
-    if magic[..got] != *mcap::MAGIC {
-        return Err(ExportError::NotMcap(input.to_path_buf()));
-    }
-    Ok(())
-}
 
-fn export_into(input: &Path, output: &Path) -> Result<Exported, ExportError> {
-    let unreadable =
-        |e: std::io::Error| ExportError::Unreadable(input.to_path_buf(), e.to_string());
-    let cannot_write =
-        |e: &dyn std::fmt::Display| ExportError::Write(output.to_path_buf(), e.to_string());
-    let source = File::open(input).map_err(unreadable)?;
-    let target = File::create(output).map_err(|e| cannot_write(&e))?;
-    let mut writer = mcap::WriteOptions::new()
-        .profile("")
-        .library(format!(
-            "mole-recorder {} (foxglove export)",
-            env!("CARGO_PKG_VERSION")
-        ))
-        .compression(Some(mcap::Compression::Lz4))
-        .create(BufWriter::new(target))
-        .map_err(|e| cannot_write(&e))?;
-    let expected: BTreeMap<&str, &str> = topics::all().into_iter().collect();
-    let sizes: BTreeMap<&str, usize> = mole_types::layout::all()
-        .into_iter()
-        .map(|t| (t.type_name, t.size))
-        .collect();
-    let mut channels: BTreeMap<&'static str, u16> = BTreeMap::new();
-    let mut converter = Converter::default();
-    let mut exported = Exported {
-        read: 0,
-        written: BTreeMap::new(),
-    };
-    let mut mole_channels = 0u64;
-    for message in mcap::io::MessageReader::new(BufReader::new(source)) {
-        let message = message.map_err(|e| ExportError::Corrupt {
-            path: input.to_path_buf(),
-            messages: exported.read,
-            reason: e.to_string(),
-        })?;
-        exported.read += 1;
-        let topic = message.channel.topic.as_str();
-        let Some(schema) = message.channel.schema.as_ref() else {
-            continue;
-        };
-        if schema.encoding != SCHEMA_ENCODING {
-            continue;
-        }
-        mole_channels += 1;
-        let Some(&type_name) = expected.get(topic) else {
-            continue;
-        };
-        if schema.name != type_name {
-            return Err(ExportError::OtherLayout {
-                path: input.to_path_buf(),
-                topic: topic.to_string(),
-                recorded: schema.name.clone(),
-                expected: type_name.to_string(),
-            });
-        }
-        let size = sizes.get(type_name).copied().unwrap_or(0);
-        if message.data.len() != size {
-            return Err(ExportError::BadSample {
-                path: input.to_path_buf(),
-                topic: topic.to_string(),
-                size: message.data.len(),
-                expected: size,
-            });
-        }
-        for converted in converter.convert(topic, message.log_time, &message.data) {
-            let channel = match channels.get(converted.topic) {
-                Some(&id) => id,
-                None => {
-                    let schema = schemas::json_schema(converted.schema)
-                        .expect("every converted message has a schema");
-                    let schema_id = writer
-                        .add_schema(converted.schema, JSON_SCHEMA_ENCODING, schema.as_bytes())
-                        .map_err(|e| cannot_write(&e))?;
-                    let id = writer
-                        .add_channel(
-                            schema_id,
-                            converted.topic,
-                            JSON_MESSAGE_ENCODING,
-                            &BTreeMap::new(),
-                        )
-                        .map_err(|e| cannot_write(&e))?;
-                    channels.insert(converted.topic, id);
-                    id
-                }
-            };
-            let count = exported.written.entry(converted.topic).or_default();
-            let header = mcap::records::MessageHeader {
-                channel_id: channel,
-                sequence: u32::try_from(*count).unwrap_or(u32::MAX),
-                log_time: message.log_time,
-                publish_time: message.publish_time,
-            };
-            writer
-                .write_to_known_channel(&header, converted.message.to_string().as_bytes())
-                .map_err(|e| cannot_write(&e))?;
-            *count += 1;
-        }
+    fn channel_metadata(&self) -> BTreeMap<String, String> {
+        BTreeMap::new()
     }
-    if mole_channels == 0 {
-        return Err(ExportError::NotMole(input.to_path_buf()));
+
+    fn convert(&mut self, topic: &str, log_time: u64, data: &[u8]) -> Vec<Exporting> {
+        Converter::convert(self, topic, log_time, data)
+            .into_iter()
+            .map(|c| Exporting {
+                topic: c.topic,
+                schema: c.schema,
+                data: c.message.to_string().into_bytes(),
+            })
+            .collect()
     }
-    writer.finish().map_err(|e| cannot_write(&e))?;
-    Ok(exported)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::schema::SCHEMA_ENCODING;
     use crate::tape::tests::{TempFile, sample, truth, write};
     use mole_types::{Landmark, Particle, Square};
+    use std::fs::File;
 
     fn zeroed<M: bytemuck::Zeroable>() -> M {
         M::zeroed()
@@ -925,7 +771,8 @@ mod tests {
             .map(|k| sample(topics::WORLD_TRUTH.name, &truth(k, k as f64 / 2.0)))
             .collect();
         write(&input.0, records);
-        let exported = export(&input.0, &output.0).expect("export");
+        let exported =
+            crate::export(&input.0, &output.0, &mut Converter::default()).expect("export");
         assert_eq!(exported.written["/truth"], 5);
         let bytes = std::fs::read(&output.0).unwrap();
         let mut xs = Vec::new();
@@ -950,7 +797,7 @@ mod tests {
     fn what_is_not_a_recording_is_refused_naming_the_file() {
         let (input, output) = (TempFile::new("fox-garbage"), TempFile::new("fox-none"));
         std::fs::write(&input.0, b"not a recording at all").unwrap();
-        let refused = export(&input.0, &output.0)
+        let refused = crate::export(&input.0, &output.0, &mut Converter::default())
             .expect_err("garbage")
             .to_string();
         assert!(refused.contains(&*input.0.to_string_lossy()), "{refused}");
@@ -972,7 +819,7 @@ mod tests {
         w.write_to_known_channel(&header, b"{}").unwrap();
         w.finish().unwrap();
         drop(w);
-        let refused = export(&input.0, &output.0)
+        let refused = crate::export(&input.0, &output.0, &mut Converter::default())
             .expect_err("foreign")
             .to_string();
         assert!(refused.contains("not a mole recording"), "{refused}");
@@ -1007,7 +854,9 @@ mod tests {
             .unwrap();
         w.finish().unwrap();
         drop(w);
-        let refused = export(&input.0, &output.0).expect_err("v0").to_string();
+        let refused = crate::export(&input.0, &output.0, &mut Converter::default())
+            .expect_err("v0")
+            .to_string();
         assert!(refused.contains("world/truth"), "{refused}");
         assert!(
             refused.contains("mole.Truth.v0") && refused.contains("mole.Truth.v1"),
@@ -1016,7 +865,9 @@ mod tests {
         assert!(!output.0.exists());
 
         let before = std::fs::read(&input.0).unwrap();
-        let refused = export(&input.0, &input.0).expect_err("itself").to_string();
+        let refused = crate::export(&input.0, &input.0, &mut Converter::default())
+            .expect_err("itself")
+            .to_string();
         assert!(refused.contains("is the recording itself"), "{refused}");
         assert_eq!(
             std::fs::read(&input.0).unwrap(),
@@ -1035,7 +886,9 @@ mod tests {
         write(&input.0, records);
         let bytes = std::fs::read(&input.0).unwrap();
         std::fs::write(&input.0, &bytes[..bytes.len() / 2]).unwrap();
-        let refused = export(&input.0, &output.0).expect_err("cut").to_string();
+        let refused = crate::export(&input.0, &output.0, &mut Converter::default())
+            .expect_err("cut")
+            .to_string();
         assert!(refused.contains("truncated or corrupt"), "{refused}");
         assert!(!output.0.exists());
     }
