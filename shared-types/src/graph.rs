@@ -69,7 +69,9 @@ pub struct RoleSpec {
     pub program: &'static str,
     /// The topics it reads (besides `stack/stats`, which only the monitor reads).
     pub inputs: &'static [&'static str],
-    /// The topics it writes (besides `stack/stats`, which every process writes).
+    /// The topics it writes (besides `stack/stats`, which every process writes), in the order a
+    /// step publishes them: a process woken by one finds those before it already in (each
+    /// role's harness test in its `main.rs` checks the order).
     pub outputs: &'static [&'static str],
     /// The output that shows it at work: one message per handled step.
     pub step_output: Option<&'static str>,
@@ -100,10 +102,10 @@ pub const GRAPH: &[RoleSpec] = &[
         program: "mole-sensing",
         inputs: &[WORLD_MAP.name, WORLD_TRUTH.name],
         outputs: &[
-            SENSING_SCAN.name,
-            SENSING_TACTILE.name,
-            SENSING_BEACONS.name,
             SENSING_FIX.name,
+            SENSING_BEACONS.name,
+            SENSING_TACTILE.name,
+            SENSING_SCAN.name,
             SENSING_ODOM.name,
         ],
         step_output: Some(SENSING_SCAN.name),
@@ -143,7 +145,7 @@ pub const GRAPH: &[RoleSpec] = &[
             SENSING_SCAN.name,
             SENSING_TACTILE.name,
         ],
-        outputs: &[MAPPING_GRID.name, MAPPING_CONTACT.name],
+        outputs: &[MAPPING_CONTACT.name, MAPPING_GRID.name],
         step_output: Some(MAPPING_GRID.name),
         swap: Swap::Allowed,
         resume: Resume::From(&[MAPPING_GRID.name, MAPPING_CONTACT.name]),

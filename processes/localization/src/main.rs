@@ -164,6 +164,9 @@ mod tests {
             harness.published(topics::LOCALIZATION_LANDMARKS),
         );
         let slam = kind.is_slam();
+        harness
+            .check_publish_order(Role::Localization.spec().outputs)
+            .unwrap();
         assert_eq!(
             (poses.len(), landmarks.len()),
             (119, if slam { 119 } else { 0 })

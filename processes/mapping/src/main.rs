@@ -116,6 +116,9 @@ mod tests {
             harness.published(topics::MAPPING_CONTACT),
         );
         assert_eq!((grids.len(), contacts.len()), (5, 5));
+        harness
+            .check_publish_order(Role::Mapping.spec().outputs)
+            .unwrap();
         for topic in [topics::MAPPING_GRID, topics::MAPPING_CONTACT] {
             assert!(
                 harness.published_after(topic)[3] > touch_of_step_3,

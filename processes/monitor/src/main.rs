@@ -144,6 +144,9 @@ mod tests {
         assert_eq!(summary.pose_samples, 10);
         assert!((summary.localization_rmse_m.unwrap() - 0.1).abs() < 1e-9);
         let statuses = harness.published(topics::MONITOR_STATUS);
+        harness
+            .check_publish_order(Role::Monitor.spec().outputs)
+            .unwrap();
         assert_eq!(
             statuses.last().map(|s| (s.header.tick, s.finished)),
             Some((10, 1))

@@ -162,6 +162,9 @@ mod tests {
             harness.published(topics::PLANNING_STATUS),
         );
         assert_eq!((cmds.len(), statuses.len()), (6, 6));
+        harness
+            .check_publish_order(Role::Planning.spec().outputs)
+            .unwrap();
         assert!(harness.published_after(topics::PLANNING_CMD)[4] > grid_of_step_3);
         assert!(
             cmds.iter().any(|c| c.v != 0.0 || c.omega != 0.0),

@@ -103,6 +103,38 @@ impl Harness {
         sent.iter().map(|(made, _)| *made).collect()
     }
 
+    /// What the process published, in order: each sample's tick and topic.
+    pub fn publish_order(&self) -> Vec<(u64, &'static str)> {
+        self.bench.order.borrow().clone()
+    }
+
+    /// Checks that each step published its topics in the order of `outputs` (a role's row of
+    /// the graph, `RoleSpec::outputs`), each once at most: the order the stack relies on (the
+    /// output that wakes the next process goes last).
+    pub fn check_publish_order(&self, outputs: &[&str]) -> Result<(), String> {
+        let order = self.bench.order.borrow();
+        let mut ticks: Vec<u64> = order.iter().map(|(tick, _)| *tick).collect();
+        ticks.sort_unstable();
+        ticks.dedup();
+        for tick in ticks {
+            let step: Vec<&str> = order
+                .iter()
+                .filter(|(t, _)| *t == tick)
+                .map(|(_, n)| *n)
+                .collect();
+            let places: Vec<Option<usize>> = step
+                .iter()
+                .map(|topic| outputs.iter().position(|o| o == topic))
+                .collect();
+            if places.iter().any(Option::is_none) || !places.windows(2).all(|w| w[0] < w[1]) {
+                return Err(format!(
+                    "step {tick} published {step:?}, not in the order of the graph's {outputs:?}"
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// How many deliveries the process has not been woken for yet (0 once its loop ended by
     /// running out of them).
     pub fn undelivered(&self) -> usize {
@@ -142,6 +174,8 @@ pub(crate) struct Bench {
     seqs: RefCell<HashMap<&'static str, u64>>,
     /// Deliveries made so far.
     made: Cell<usize>,
+    /// Every sample published, in order: its tick and topic.
+    order: RefCell<Vec<(u64, &'static str)>>,
     /// The process's statistics (its context's).
     pub(crate) stats: StatsRegistry,
 }
@@ -173,7 +207,13 @@ impl Bench {
     }
 
     /// Keeps what a publisher sent, with the number of deliveries made by then.
-    pub(crate) fn keep<M: Message>(&self, outbox: &Outbox<M>, message: Box<M>) {
+    pub(crate) fn keep<M: Message>(
+        &self,
+        topic: &'static str,
+        outbox: &Outbox<M>,
+        message: Box<M>,
+    ) {
+        self.order.borrow_mut().push((message.header().tick, topic));
         outbox.sent.borrow_mut().push((self.made.get(), message));
     }
 

@@ -152,7 +152,7 @@ impl<M: Message> Publisher<M> {
                 let mut message: Box<M> = bytemuck::zeroed_box();
                 fill(&mut message);
                 self.stamp(&mut message, tick, origin_ns);
-                bench.keep(outbox, message);
+                bench.keep(self.topic, outbox, message);
                 self.seq += 1;
                 self.stats.counted(None);
                 return Ok(());

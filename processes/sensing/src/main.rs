@@ -85,6 +85,9 @@ mod tests {
         .unwrap();
 
         assert_eq!(harness.invalid(topics::WORLD_TRUTH.name), 1);
+        harness
+            .check_publish_order(Role::Sensing.spec().outputs)
+            .unwrap();
         let mut map: Box<WorldMap> = bytemuck::zeroed_box();
         scenario.write_world_map(&mut map);
         let mut sensing = Sensing::new(&map, scenario.seed).unwrap();

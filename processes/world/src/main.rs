@@ -121,6 +121,9 @@ mod tests {
         let scenario = load_scenario(path.as_ref()).unwrap();
         let expected_map = scenario.world_map();
         let maps = harness.published(topics::WORLD_MAP);
+        harness
+            .check_publish_order(Role::World.spec().outputs)
+            .unwrap();
         assert_eq!(maps.len(), 1);
         assert!(same_payload(&*expected_map, &*maps[0]));
         let (truths, ticks) = (
