@@ -10,6 +10,7 @@ pub mod bench;
 pub mod bench_ipc;
 pub mod bench_stack;
 pub mod control;
+pub mod doctor;
 mod error;
 pub mod eval;
 pub mod export;

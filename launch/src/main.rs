@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 use mole_launch::bench::{BenchCommand, bench};
 use mole_launch::control::{NamespaceArgs, SwapArgs, status, stop, swap};
+use mole_launch::doctor::{DoctorArgs, doctor};
 use mole_launch::eval::{EvalArgs, eval};
 use mole_launch::export::{ExportArgs, export};
 use mole_launch::fault::{FaultArgs, fault};
@@ -66,6 +67,10 @@ enum MoleCommand {
     /// Measure latency and throughput.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Check this machine for what makes iceoryx2 stacks fail (shared memory, iceoryx2's
+    /// directory, what killed processes left, other users' stacks, containers, the clock, limits)
+    /// and say how to fix each; exit 1 when something is wrong.
+    Doctor(DoctorArgs),
 }
 
 fn main() -> ExitCode {
@@ -87,6 +92,7 @@ fn main() -> ExitCode {
         MoleCommand::Info(args) => info(&args),
         MoleCommand::Export(args) => export(&args),
         MoleCommand::Bench(command) => bench(&command),
+        MoleCommand::Doctor(args) => doctor(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -429,6 +429,67 @@ fn std_path(path: &iceoryx2::prelude::Path) -> PathBuf {
     PathBuf::from(std::ffi::OsStr::from_bytes(path.as_bytes()))
 }
 
+/// What iceoryx2 and mole keep on this machine, looked at without changing anything
+/// (`mole doctor`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NodeCensus {
+    /// iceoryx2's directory for its records (`/tmp/iceoryx2` by default).
+    pub root: PathBuf,
+    /// Nodes whose process is alive, by name.
+    pub live: Vec<String>,
+    /// Nodes whose process is gone but whose resources are still there, by name (or id).
+    pub dead: Vec<String>,
+    /// Nodes this user may not look at (another user's, made private), by id.
+    pub inaccessible: Vec<String>,
+    /// Nodes whose records are incomplete or altered, by id.
+    pub undefined: Vec<String>,
+    /// Doorbells of nodes that no longer exist.
+    pub stale_doorbells: usize,
+    /// Why iceoryx2 could not list the nodes, if it could not.
+    pub unlisted: Option<String>,
+}
+
+/// Looks at the nodes and doorbells on this machine; removes nothing (`cleanup_dead_nodes`
+/// does).
+pub fn node_census() -> NodeCensus {
+    let config = Config::global_config();
+    let mut census = NodeCensus {
+        root: std_path(config.global.root_path()),
+        ..NodeCensus::default()
+    };
+    let mut listed = HashSet::new();
+    let name_of = |details: Option<&iceoryx2::node::NodeDetails>, id: u128| {
+        details.map_or_else(|| format!("node {id}"), |d| d.name().to_string())
+    };
+    let result = Node::<ipc::Service>::list(config, |state| {
+        let id = state.node_id().value();
+        listed.insert(id);
+        match state {
+            NodeState::Alive(view) => census.live.push(name_of(view.details().as_ref(), id)),
+            NodeState::Dead(view) => census.dead.push(name_of(view.details().as_ref(), id)),
+            NodeState::Inaccessible(_) => census.inaccessible.push(format!("node {id}")),
+            NodeState::Undefined(_) => census.undefined.push(format!("node {id}")),
+        }
+        CallbackProgression::Continue
+    });
+    census.unlisted = result.err().map(|e| format!("{e:?}"));
+    census.stale_doorbells = entries(&crate::doorbell::doorbell_dir(config))
+        .into_iter()
+        .filter(|path| {
+            path.file_name()
+                .and_then(|n| n.to_str())
+                .and_then(|n| n.parse::<u128>().ok())
+                .is_some_and(|node| {
+                    !listed.contains(&node)
+                        && all_older_than(std::slice::from_ref(path), HALF_MADE_AGE)
+                })
+        })
+        .count();
+    census.live.sort();
+    census.dead.sort();
+    census
+}
+
 /// Names of the live nodes of a namespace (`mole/<ns>/<role>`), e.g. to refuse a second stack.
 pub fn live_nodes_in_namespace(namespace: &str) -> Vec<String> {
     let prefix = format!("mole/{namespace}/");

@@ -38,7 +38,10 @@ mod step;
 mod time;
 mod waitset;
 
-pub use admin::{HALF_MADE_AGE, cleanup_dead_nodes, list_topics, live_nodes_in_namespace};
+pub use admin::{
+    HALF_MADE_AGE, NodeCensus, cleanup_dead_nodes, list_topics, live_nodes_in_namespace,
+    node_census,
+};
 pub use alloc_counter::{CountingAllocator, allocations_during};
 pub use clock::{ClockMode, parse_point};
 pub use context::{CommonArgs, Context, PayloadLayout, STUCK_CONSUMER, layout_mismatch};
