@@ -55,8 +55,8 @@ enum MoleCommand {
     View(ViewArgs),
     /// Describe a recording: duration, ticks, topics with counts and rates, metadata.
     Info(InfoArgs),
-    /// Write a recording again with Foxglove's well-known schemas (JSON), so Foxglove or
-    /// Lichtblick shows it without a plug-in.
+    /// Write a recording again for other tools: with Foxglove's well-known schemas (JSON), so
+    /// Foxglove or Lichtblick shows it without a plug-in, or as a ROS 2 bag (CDR).
     Export(ExportArgs),
     /// Run a planner and estimator over a family of generated worlds (lockstep, parallel jobs)
     /// and report success, coverage, errors and consistency with 95% intervals.
