@@ -104,7 +104,10 @@ fn a_killed_process_leaves_a_dead_node_that_clean_removes_and_a_live_one_stays()
 
     let cleaning = doctor(&["--clean"]);
     let report = text(&cleaning);
-    assert!(line(&report, "clean").contains("removed what"), "{report}");
+    assert!(
+        line(&report, "clean").contains("leftovers of dead processes"),
+        "{report}"
+    );
     assert!(!report.contains(&dead_node), "{report}");
     let after = text(&doctor(&["--json"]));
     let json: serde_json::Value = serde_json::from_str(&after).expect("JSON");

@@ -248,8 +248,8 @@ pub fn leftovers(census: &NodeCensus, cleaned: Option<usize>) -> Vec<Finding> {
         findings.push(Finding::ok(
             "clean",
             format!(
-                "removed what {n} dead node{} left",
-                if n == 1 { "" } else { "s" }
+                "removed {n} leftover{} of dead processes (nodes, their records, doorbells)",
+                plural(n)
             ),
         ));
     }
