@@ -209,6 +209,17 @@ impl Failure {
     pub fn exit_code(&self) -> u8 {
         self.kind.exit_code()
     }
+
+    /// How a `mole` command ends: success, or `error: …` on stderr and the failure's exit code.
+    pub fn exit(result: Result<(), Failure>) -> std::process::ExitCode {
+        match result {
+            Ok(()) => std::process::ExitCode::SUCCESS,
+            Err(f) => {
+                eprintln!("error: {}", f.message);
+                std::process::ExitCode::from(f.exit_code())
+            }
+        }
+    }
 }
 
 impl From<LaunchError> for Failure {

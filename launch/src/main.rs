@@ -94,11 +94,5 @@ fn main() -> ExitCode {
         MoleCommand::Bench(command) => bench(&command),
         MoleCommand::Doctor(args) => doctor(&args),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(f) => {
-            eprintln!("error: {}", f.message);
-            ExitCode::from(f.exit_code())
-        }
-    }
+    mole_launch::Failure::exit(result)
 }
