@@ -1,7 +1,7 @@
 //! `mole export FILE OUT --foxglove | --ros2`: a recording rewritten for the tools robotics
 //! engineers already use: with Foxglove's well-known schemas, so Foxglove or Lichtblick opens it
-//! without a plug-in (`mole_recorder::foxglove`), or as a ROS 2 bag, so `ros2 bag play` and the
-//! ROS 2 tools read it (`mole_recorder::ros2`).
+//! without a plug-in (`mole_recorder::foxglove`), or as a ROS 2 bag in rosbag2's MCAP profile
+//! (`mole_recorder::ros2`).
 
 use crate::Failure;
 use clap::Args;

@@ -1,6 +1,7 @@
 //! A recording exported as a ROS 2 bag: rosbag2's MCAP profile (`ros2`), each message in CDR
 //! with its `ros2msg` definition as the channel's schema, stamped with the simulated time of its
-//! step (tick · Δt), so `ros2 bag play` and the ROS 2 tools read it as a bag a robot recorded.
+//! step (tick · Δt): the format `ros2 bag` writes and reads. (Checked with mcap-ros2-support's
+//! decoder; ROS 2 itself is not installed where the tests run.)
 //!
 //! | mole topic | channel | ROS 2 type |
 //! | --- | --- | --- |
