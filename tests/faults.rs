@@ -427,8 +427,18 @@ fn other_user_probe() {
 }
 
 /// Open file descriptors of a process.
-fn open_fds(pid: u32) -> usize {
-    std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count())
+/// What each of a process's open descriptors is (the target of its `/proc/PID/fd` link).
+fn open_fds(pid: u32) -> Vec<String> {
+    let entries = std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .into_iter()
+        .flatten()
+        .flatten();
+    let mut targets: Vec<String> = entries
+        .filter_map(|e| std::fs::read_link(e.path()).ok())
+        .map(|t| t.display().to_string())
+        .collect();
+    targets.sort();
+    targets
 }
 
 /// A hundred SIGKILLs of planning, each followed by a restart, grow neither the shared memory
@@ -459,7 +469,7 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
     let log = stack.out.join("logs").join("planning.log");
     let readies = || std::fs::read_to_string(&log).map_or(0, |t| t.matches(" ready ").count());
     let mut pid = pid_of(&stack.namespace, Role::Planning.spec().program).expect("planning runs");
-    let (mut shm_at_10, mut fds_at_10) = (Vec::new(), 0);
+    let (mut shm_at_10, mut fds_at_10) = (Vec::new(), Vec::new());
     let wait_ready = |starts: usize| {
         let deadline = std::time::Instant::now() + Duration::from_secs(20);
         while readies() < starts {
@@ -476,12 +486,29 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
     let mut pids: std::collections::BTreeSet<u32> =
         processes_of(&stack.namespace).into_iter().collect();
     pids.insert(stack.pid());
-    // Both snapshots in the same state: the restarted process ready, the dead one cleaned.
+    // Both snapshots in the same state: the restarted process ready, the dead one cleaned, and
+    // the launcher's lazy connections to the new process's publishers made (its keeper connects
+    // on its next read, a moment after the process is ready): the counts are read until they
+    // hold still for a second (6 s at most).
     let snapshot = |starts: usize, pids: &mut std::collections::BTreeSet<u32>| {
         wait_ready(starts);
-        std::thread::sleep(Duration::from_millis(300));
-        pids.extend(processes_of(&stack.namespace));
-        (made_by(&shm_files(), pids), open_fds(stack.pid()))
+        let read = |pids: &mut std::collections::BTreeSet<u32>| {
+            pids.extend(processes_of(&stack.namespace));
+            (made_by(&shm_files(), pids), open_fds(stack.pid()))
+        };
+        let deadline = std::time::Instant::now() + Duration::from_secs(6);
+        let mut last = read(pids);
+        let mut still_since = std::time::Instant::now();
+        while std::time::Instant::now() < deadline && still_since.elapsed() < Duration::from_secs(1)
+        {
+            std::thread::sleep(Duration::from_millis(200));
+            let now = read(pids);
+            if (now.0.len(), now.1.len()) != (last.0.len(), last.1.len()) {
+                still_since = std::time::Instant::now();
+            }
+            last = now;
+        }
+        last
     };
     for cycle in 1..=100 {
         // Kill a running process, not one still creating its node: iceoryx2 0.10 cannot clean
@@ -501,17 +528,8 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
             (shm_at_10, fds_at_10) = snapshot(cycle + 1, &mut pids);
         }
     }
-    // A connection a live process opens lazily (on its next publish) may be a moment late on a
-    // loaded machine: the count is read again for up to 5 s. A leak of one file a cycle is 90
-    // files, which no wait hides.
-    let (mut shm_at_100, mut fds_at_100) = snapshot(101, &mut pids);
-    for _ in 0..5 {
-        if shm_at_100.len() <= shm_at_10.len() && fds_at_100 <= fds_at_10 {
-            break;
-        }
-        std::thread::sleep(Duration::from_secs(1));
-        (shm_at_100, fds_at_100) = snapshot(101, &mut pids);
-    }
+    // A leak of one file a cycle is 90 files, which no settling hides.
+    let (shm_at_100, fds_at_100) = snapshot(101, &mut pids);
     let grown: Vec<&String> = shm_at_100
         .iter()
         .filter(|f| !shm_at_10.contains(f))
@@ -522,9 +540,15 @@ fn a_hundred_kill_and_restart_cycles_leak_no_shared_memory_and_no_descriptors() 
         shm_at_10.len(),
         shm_at_100.len(),
     );
+    let new_fds: Vec<&String> = fds_at_100
+        .iter()
+        .filter(|f| !fds_at_10.contains(f))
+        .collect();
     assert!(
-        fds_at_100 <= fds_at_10,
-        "the launcher's descriptors grew from {fds_at_10} to {fds_at_100}"
+        fds_at_100.len() <= fds_at_10.len(),
+        "the launcher's descriptors grew from {} to {}; new since cycle 10: {new_fds:?}",
+        fds_at_10.len(),
+        fds_at_100.len()
     );
     drop(stack);
     let _ = std::fs::remove_file(&launch_path);
