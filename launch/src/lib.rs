@@ -20,6 +20,7 @@ pub mod hot_swap;
 pub mod inject;
 pub mod keeper;
 pub mod launch_file;
+pub mod new;
 pub mod param;
 pub mod record;
 pub mod replay;

@@ -8,6 +8,7 @@ use mole_launch::eval::{EvalArgs, eval};
 use mole_launch::export::{ExportArgs, export};
 use mole_launch::fault::{FaultArgs, fault};
 use mole_launch::g2o::{G2oArgs, g2o};
+use mole_launch::new::{NewArgs, new};
 use mole_launch::param::{ParamArgs, param};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
@@ -16,12 +17,9 @@ use mole_launch::up::{UpArgs, up};
 use mole_launch::view::{ViewArgs, view};
 use std::process::ExitCode;
 
+/// Start, supervise and measure the mole robot stack
 #[derive(Debug, Parser)]
-#[command(
-    name = "mole",
-    version,
-    about = "Start, supervise and measure the mole robot stack"
-)]
+#[command(name = "mole", version)]
 struct Cli {
     #[command(subcommand)]
     command: MoleCommand,
@@ -71,6 +69,8 @@ enum MoleCommand {
     /// directory, what killed processes left, other users' stacks, containers, the clock, limits)
     /// and say how to fix each; exit 1 when something is wrong.
     Doctor(DoctorArgs),
+    /// Make a planner in a crate of its own, to run in its role with `mole up --swap`.
+    New(NewArgs),
 }
 
 fn main() -> ExitCode {
@@ -93,6 +93,7 @@ fn main() -> ExitCode {
         MoleCommand::Export(args) => export(&args),
         MoleCommand::Bench(command) => bench(&command),
         MoleCommand::Doctor(args) => doctor(&args),
+        MoleCommand::New(args) => new(&args),
     };
     mole_launch::Failure::exit(result)
 }

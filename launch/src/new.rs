@@ -1,0 +1,228 @@
+//! `mole new planner NAME [DIR]`: a planner in a crate of its own, outside mole's workspace,
+//! that builds on its own and runs in the planning role (`mole up --swap
+//! planning=DIR/NAME/target/release/NAME`). It depends on mole's runtime, message and planning
+//! crates by path (this checkout's, or `--mole`'s).
+
+use crate::Failure;
+use clap::{Args, ValueEnum};
+use std::path::{Path, PathBuf};
+
+/// What kind of process to make.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Kind {
+    /// A planner in the planning role: pose, scan, touch, grid and goal in; command and status out.
+    Planner,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct NewArgs {
+    pub kind: Kind,
+    /// The crate's name, also its program's: lowercase letters, digits, `-` and `_`.
+    pub name: String,
+    /// Where to make it (DIR/NAME); the current directory by default.
+    pub dir: Option<PathBuf>,
+    /// The mole checkout whose crates it depends on; the one `mole` was built from by default.
+    #[arg(long)]
+    pub mole: Option<PathBuf>,
+}
+
+/// The checkout this `mole` was built from.
+fn this_checkout() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
+}
+
+/// `mole new`: writes the crate and says how to build and run it.
+pub fn new(args: &NewArgs) -> Result<(), Failure> {
+    let name = &args.name;
+    let valid = |c: char| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-' || c == '_';
+    if name.is_empty()
+        || !name.chars().all(valid)
+        || !name.starts_with(|c: char| c.is_ascii_lowercase())
+    {
+        return Err(Failure::input(format!(
+            "mole new: `{name}`: expected a crate name of lowercase letters, digits, `-` and `_`, \
+             starting with a letter"
+        )));
+    }
+    let mole = args.mole.clone().unwrap_or_else(this_checkout);
+    let mole = mole
+        .canonicalize()
+        .map_err(|e| Failure::input(format!("mole new: --mole {}: {e}", mole.display())))?;
+    if !mole.join("processes/runtime/Cargo.toml").is_file() {
+        return Err(Failure::input(format!(
+            "mole new: {} is not a mole checkout (expected processes/runtime/Cargo.toml in it)",
+            mole.display()
+        )));
+    }
+    let dir = args
+        .dir
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("."))
+        .join(name);
+    if dir.exists() {
+        return Err(Failure::input(format!(
+            "mole new: {} exists already: choose another name or directory",
+            dir.display()
+        )));
+    }
+    let files = planner_files(name, &mole);
+    for (path, text) in &files {
+        let path = dir.join(path);
+        let written = path
+            .parent()
+            .map_or(Ok(()), std::fs::create_dir_all)
+            .and_then(|()| std::fs::write(&path, text));
+        written
+            .map_err(|e| Failure::run(format!("mole new: cannot write {}: {e}", path.display())))?;
+    }
+    // The workspace's lock file: the crate builds with the versions mole was tested with.
+    let lock = mole.join("Cargo.lock");
+    if lock.is_file() {
+        let _ = std::fs::copy(&lock, dir.join("Cargo.lock"));
+    }
+    println!(
+        "{}: a planner crate. Build and run it:\n  cargo build --release --manifest-path {}/Cargo.toml\n  \
+         mole up --swap planning={}/target/release/{name}",
+        dir.display(),
+        dir.display(),
+        dir.display()
+    );
+    Ok(())
+}
+
+/// The files of a planner crate named `name` on the mole checkout `mole`.
+pub fn planner_files(name: &str, mole: &Path) -> Vec<(&'static str, String)> {
+    let path = |p: &str| mole.join(p).display().to_string();
+    let manifest = format!(
+        r#"[package]
+name = "{name}"
+version = "0.1.0"
+edition = "2024"
+
+[dependencies]
+mole-runtime = {{ path = "{runtime}" }}
+mole-types = {{ path = "{types}" }}
+mole-planning = {{ path = "{planning}" }}
+clap = {{ version = "4", features = ["derive", "env"] }}
+
+# A crate of its own, not a member of mole's workspace.
+[workspace]
+"#,
+        runtime = path("processes/runtime"),
+        types = path("shared-types"),
+        planning = path("processes/planning"),
+    );
+    vec![
+        ("Cargo.toml", manifest),
+        ("src/main.rs", PLANNER_MAIN.replace("{name}", name)),
+        (".gitignore", "/target\n".to_string()),
+    ]
+}
+
+/// A planner process: the planning role's ports (mole's graph), a planner that drives straight
+/// and turns in place while something is close ahead.
+const PLANNER_MAIN: &str = r#"//! {name}: a planner in the planning role of a mole stack.
+//!     cargo build --release && mole up --swap planning=target/release/{name}
+
+use clap::Parser;
+use mole_planning::{Command, Planner, PlannerInput, RobotLimits};
+use mole_runtime::{CommonArgs, Order, Process, Rule};
+use mole_types::{MODE_EXPLORE, PlannerKind, Pose2, Role, topics};
+
+#[derive(Debug, Parser)]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+/// Drives straight at half speed; turns left in place while the lidar sees something closer than
+/// 0.6 m within 0.4 rad of straight ahead.
+#[derive(Debug)]
+struct Cautious {
+    limits: RobotLimits,
+}
+
+impl Planner for Cautious {
+    fn kind(&self) -> PlannerKind {
+        PlannerKind::RandomWalk
+    }
+
+    fn step(&mut self, input: &PlannerInput) -> Command {
+        let ahead = |(i, &r): (usize, &f32), scan: &mole_types::Scan| {
+            let angle = scan.angle_min + i as f32 * scan.angle_increment;
+            angle.abs() < 0.4 && r < 0.6
+        };
+        let blocked = input
+            .scan
+            .is_some_and(|s| s.ranges().iter().enumerate().any(|b| ahead(b, s)));
+        let (v, omega) = match blocked {
+            true => (0.0, 0.5 * self.limits.max_omega),
+            false => (0.5 * self.limits.max_speed, 0.0),
+        };
+        Command { v, omega, mode: MODE_EXPLORE }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let args = Args::parse();
+    mole_runtime::run_role(Role::Planning, &args.common, run)
+}
+
+/// The planning role's ports, as mole's graph has them: the pose triggers a step.
+fn run(mut p: Process) -> Result<(), Box<dyn std::error::Error>> {
+    let pose = p.trigger(topics::LOCALIZATION_POSE, Order::Newest)?;
+    let scan = p.input(topics::SENSING_SCAN, Rule::SameTick)?;
+    let tactile = p.input(topics::SENSING_TACTILE, Rule::SameTick)?;
+    let grid = p.input(topics::MAPPING_GRID, Rule::PreviousTick)?;
+    let _goal = p.input(topics::OPERATOR_GOAL, Rule::Newest)?;
+    let mut cmd_out = p.output(topics::PLANNING_CMD)?;
+    let mut status_out = p.output(topics::PLANNING_STATUS)?;
+    p.run(
+        |start| {
+            let limits = RobotLimits::from(&start.map.robot).sanitized();
+            Ok((Cautious { limits }, Command::STOP, start.map.dt))
+        },
+        |(planner, last, dt), step| {
+            let at = step.trigger(pose);
+            let command = planner.step(&PlannerInput {
+                tick: step.tick(),
+                dt: *dt,
+                pose: Pose2::new(at.x, at.y, at.theta),
+                scan: step.get(scan),
+                tactile: step.get(tactile),
+                grid: step.get(grid),
+                last_command: *last,
+            });
+            *last = command;
+            let (k, origin) = (step.tick(), step.origin_ns());
+            cmd_out.publish(k, origin, |c| (c.v, c.omega, c.mode, c._pad) = (command.v, command.omega, command.mode, 0))?;
+            status_out.publish(k, origin, |s| {
+                planner.write_status(s);
+                s.mode = command.mode;
+            })?;
+            Ok(())
+        },
+    )
+}
+"#;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_planner_crate_depends_on_the_checkout_by_path_and_names_its_program() {
+        let files = planner_files("careful", Path::new("/src/mole"));
+        let manifest = &files[0].1;
+        assert!(manifest.contains("name = \"careful\""));
+        assert!(manifest.contains("mole-runtime = { path = \"/src/mole/processes/runtime\" }"));
+        assert!(
+            manifest.contains("\n[workspace]\n"),
+            "a workspace of its own"
+        );
+        assert!(files[1].1.starts_with("//! careful: a planner"));
+    }
+}

@@ -1,0 +1,118 @@
+//! `mole new planner NAME DIR`, as a user runs it: the crate it writes builds on its own
+//! (outside mole's workspace, with mole's lock file) and runs in the planning role of a
+//! lockstep stack (`mole up --swap planning=…`), whose recorded commands are its own.
+
+use mole_integration_tests::*;
+use mole_types::{Cmd, topics};
+use std::process::Command;
+use std::time::Duration;
+
+/// A directory of the test's own, removed whatever happens.
+struct Kept(std::path::PathBuf);
+impl Drop for Kept {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[test]
+fn a_new_planner_crate_builds_on_its_own_and_drives_the_stack() {
+    let _serial = serial();
+    let dir = Kept(std::env::temp_dir().join(format!("mole-new-{}", std::process::id())));
+    std::fs::create_dir_all(&dir.0).expect("a directory");
+    let made = run_mole(&["new", "planner", "careful", dir.0.to_str().expect("a path")]);
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let krate = dir.0.join("careful");
+    let main = std::fs::read_to_string(krate.join("src/main.rs")).expect("src/main.rs");
+    let own = main.lines().filter(|l| !l.trim().is_empty()).count();
+    assert!(own <= 100, "the generated planner is {own} lines");
+    // A bad name and an existing directory are refused before anything is written.
+    let bad = run_mole(&[
+        "new",
+        "planner",
+        "Bad Name",
+        dir.0.to_str().expect("a path"),
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    let again = run_mole(&["new", "planner", "careful", dir.0.to_str().expect("a path")]);
+    assert_eq!(again.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&again.stderr).contains("exists already"));
+
+    // Built as its user would, in a target directory of its own under the workspace's (so a
+    // second run reuses it), from the registry cache the workspace's build filled.
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let target = workspace().join("target/mole-new");
+    let built = Command::new(cargo)
+        .args(["build", "--offline", "--manifest-path"])
+        .arg(krate.join("Cargo.toml"))
+        .env("CARGO_TARGET_DIR", &target)
+        .env_remove("CARGO_MANIFEST_DIR")
+        .output()
+        .expect("run cargo");
+    assert!(
+        built.status.success(),
+        "the generated crate does not build:\n{}",
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let program = target.join("debug/careful");
+
+    let namespace = unique_namespace("new-planner");
+    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+    let recording = out.join("run.mcap");
+    let swap = format!("planning={}", program.display());
+    let args = [
+        "--mode",
+        "lockstep",
+        "--ticks",
+        "300",
+        "--swap",
+        &swap,
+        "--record",
+        recording.to_str().expect("a path"),
+    ];
+    let stack = Stack::start_in(&namespace, &args);
+    let kept = Kept(out.with_extension("kept"));
+    let output = stack.wait_and_copy(&kept.0, Duration::from_secs(240));
+    assert!(
+        output.status.success(),
+        "mole up failed: {}\n{}",
+        String::from_utf8_lossy(&output.stderr),
+        logs(&kept.0)
+    );
+    assert!(processes_of(&namespace).is_empty(), "processes left behind");
+    let bytes = std::fs::read(kept.0.join("run.mcap")).expect("the recording");
+    let commands: Vec<Cmd> = mcap::MessageStream::new(&bytes)
+        .expect("an MCAP file")
+        .map(|m| m.expect("a complete recording"))
+        .filter(|m| m.channel.topic == topics::PLANNING_CMD.name)
+        .map(|m| bytemuck::pod_read_unaligned::<Cmd>(&m.data))
+        .collect();
+    assert!(commands.len() >= 299, "{} commands", commands.len());
+    // Its planner's commands alone: straight ahead at one speed, or turning in place.
+    let straight = commands
+        .iter()
+        .filter(|c| c.omega == 0.0 && c.v > 0.0)
+        .count();
+    let turning = commands
+        .iter()
+        .filter(|c| c.v == 0.0 && c.omega > 0.0)
+        .count();
+    assert_eq!(
+        straight + turning,
+        commands.len(),
+        "commands not the planner's own"
+    );
+    assert!(straight > 0, "it never drove");
+    let speeds: std::collections::BTreeSet<u64> = commands
+        .iter()
+        .filter(|c| c.v > 0.0)
+        .map(|c| c.v.to_bits())
+        .collect();
+    assert_eq!(speeds.len(), 1, "one cruise speed");
+    let summary = summary(&kept.0);
+    assert!(summary.path_length_m > 0.1, "{summary:?}");
+}
