@@ -12,46 +12,9 @@ use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::Duration;
 
-const RUN_TIMEOUT: Duration = Duration::from_secs(240);
 /// The tick whose truth is compared.
 const TICK: u64 = 150;
-
-/// A directory of the test's own, removed whatever happens.
-struct Kept(PathBuf);
-impl Drop for Kept {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// A recorded lockstep run of `ticks` steps (and `more` arguments of `mole up`) that must
-/// succeed: the directory it left, with the recording `run.mcap` in it.
-fn recorded_lockstep_run(test: &str, ticks: u64, more: &[&str]) -> Kept {
-    let namespace = unique_namespace(test);
-    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
-    let file = out.join("run.mcap").display().to_string();
-    let ticks = ticks.to_string();
-    let args = ["--mode", "lockstep", "--ticks", &ticks, "--seed", "5"];
-    let args: Vec<&str> = args
-        .iter()
-        .copied()
-        .chain(more.iter().copied())
-        .chain(["--record", &file])
-        .collect();
-    let stack = Stack::start_in(&namespace, &args);
-    let kept = Kept(out.with_extension("kept"));
-    let output = stack.wait_and_copy(&kept.0, RUN_TIMEOUT);
-    assert!(
-        output.status.success(),
-        "mole up failed: {}\n{}",
-        String::from_utf8_lossy(&output.stderr),
-        logs(&kept.0)
-    );
-    assert!(processes_of(&namespace).is_empty(), "processes left behind");
-    kept
-}
 
 /// Every message of `topic` in the recording at `path`, as (log time, bytes).
 fn recorded(path: &Path, topic: &str) -> Vec<(u64, Vec<u8>)> {
@@ -66,12 +29,12 @@ fn recorded(path: &Path, topic: &str) -> Vec<(u64, Vec<u8>)> {
 
 /// Exports the recording `run.mcap` of `run` into `foxglove.mcap` beside it with `mole export
 /// --foxglove`, which must succeed: (recording, export).
-fn exported(run: &Kept) -> (PathBuf, PathBuf) {
+fn exported(run: &TempDir) -> (PathBuf, PathBuf) {
     exported_as(run, "--foxglove")
 }
 
 /// As [`exported`], with `mole export`'s `target` (`--foxglove`, `--ros2`), into `<target>.mcap`.
-fn exported_as(run: &Kept, target: &str) -> (PathBuf, PathBuf) {
+fn exported_as(run: &TempDir, target: &str) -> (PathBuf, PathBuf) {
     let name = format!("{}.mcap", target.trim_start_matches('-'));
     let (recording, export) = (run.0.join("run.mcap"), run.0.join(name));
     let output = run_mole(&[
@@ -315,7 +278,7 @@ fn every_exported_message_is_valid_against_foxgloves_published_schemas() {
 /// what was expected, no output file.
 #[test]
 fn a_file_that_is_not_a_recording_is_refused() {
-    let dir = Kept(std::env::temp_dir().join(format!("mole-export-bad-{}", std::process::id())));
+    let dir = TempDir(std::env::temp_dir().join(format!("mole-export-bad-{}", std::process::id())));
     std::fs::create_dir_all(&dir.0).expect("a directory");
     let (garbage, out) = (dir.0.join("notes.mcap"), dir.0.join("out.mcap"));
     std::fs::write(&garbage, "shopping list: bolts, wheels").expect("write");

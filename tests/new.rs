@@ -5,21 +5,11 @@
 use mole_integration_tests::*;
 use mole_types::{Cmd, topics};
 use std::process::Command;
-use std::time::Duration;
-
-/// A directory of the test's own, removed whatever happens.
-struct Kept(std::path::PathBuf);
-impl Drop for Kept {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 #[test]
 fn a_new_planner_crate_builds_on_its_own_and_drives_the_stack() {
     let _serial = serial();
-    let dir = Kept(std::env::temp_dir().join(format!("mole-new-{}", std::process::id())));
-    std::fs::create_dir_all(&dir.0).expect("a directory");
+    let dir = TempDir::new("new");
     let made = run_mole(&["new", "planner", "careful", dir.0.to_str().expect("a path")]);
     assert!(
         made.status.success(),
@@ -60,30 +50,8 @@ fn a_new_planner_crate_builds_on_its_own_and_drives_the_stack() {
     );
     let program = target.join("debug/careful");
 
-    let namespace = unique_namespace("new-planner");
-    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
-    let recording = out.join("run.mcap");
     let swap = format!("planning={}", program.display());
-    let args = [
-        "--mode",
-        "lockstep",
-        "--ticks",
-        "300",
-        "--swap",
-        &swap,
-        "--record",
-        recording.to_str().expect("a path"),
-    ];
-    let stack = Stack::start_in(&namespace, &args);
-    let kept = Kept(out.with_extension("kept"));
-    let output = stack.wait_and_copy(&kept.0, Duration::from_secs(240));
-    assert!(
-        output.status.success(),
-        "mole up failed: {}\n{}",
-        String::from_utf8_lossy(&output.stderr),
-        logs(&kept.0)
-    );
-    assert!(processes_of(&namespace).is_empty(), "processes left behind");
+    let kept = recorded_lockstep_run("new-planner", 300, &["--swap", &swap]);
     let bytes = std::fs::read(kept.0.join("run.mcap")).expect("the recording");
     let commands: Vec<Cmd> = mcap::MessageStream::new(&bytes)
         .expect("an MCAP file")

@@ -60,6 +60,34 @@ pub fn unique_namespace(test: &str) -> String {
     format!("t-{test}-{}-{nanos}", std::process::id())
 }
 
+/// A recorded lockstep run of `ticks` steps (seed 5, and `more` arguments of `mole up`) that
+/// must succeed within 240 s and leave no process behind: the directory it left, with the
+/// recording `run.mcap` in it.
+pub fn recorded_lockstep_run(test: &str, ticks: u64, more: &[&str]) -> TempDir {
+    let namespace = unique_namespace(test);
+    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+    let file = out.join("run.mcap").display().to_string();
+    let ticks = ticks.to_string();
+    let args = ["--mode", "lockstep", "--ticks", &ticks, "--seed", "5"];
+    let args: Vec<&str> = args
+        .iter()
+        .copied()
+        .chain(more.iter().copied())
+        .chain(["--record", &file])
+        .collect();
+    let stack = Stack::start_in(&namespace, &args);
+    let kept = TempDir(out.with_extension("kept"));
+    let output = stack.wait_and_copy(&kept.0, Duration::from_secs(240));
+    assert!(
+        output.status.success(),
+        "mole up failed: {}\n{}",
+        String::from_utf8_lossy(&output.stderr),
+        logs(&kept.0)
+    );
+    assert!(processes_of(&namespace).is_empty(), "processes left behind");
+    kept
+}
+
 /// A directory of the test's own in the temp directory, removed whatever happens.
 pub struct TempDir(pub PathBuf);
 
