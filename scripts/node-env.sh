@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Creates target/node-env, a Node.js package directory with Foxglove's published message schemas
-# (the `@foxglove/schemas` package, JSON Schema form) and a JSON Schema validator (`ajv`), at the
-# versions scripts/node-env/package-lock.json pins (every transitive package too, through
-# `npm ci`): tests/export.rs validates every message of a `mole export --foxglove` file against
-# them with tests/support/validate_foxglove.mjs.
+# (the `@foxglove/schemas` package, JSON Schema form), a JSON Schema validator (`ajv`) and
+# Foxglove's WebSocket protocol client (`@foxglove/ws-protocol`, over `ws`), at the versions
+# scripts/node-env/package-lock.json pins (every transitive package too, through `npm ci`):
+# tests/export.rs validates every message of a `mole export --foxglove` file against the schemas
+# with tests/support/validate_foxglove.mjs; tests/foxglove.rs connects to `mole up --foxglove`
+# with tests/support/foxglove_client.mjs.
 # Usage: scripts/node-env.sh
 # Idempotent: a directory installed from the same lock file is left as it is. It never fails:
 # without node, npm or the package registry it says why in one line and exits 0, and the test
@@ -15,14 +17,14 @@ pinned="scripts/node-env"
 env_dir="target/node-env"
 log="$env_dir/npm.log"
 
-# Whether both packages load from $env_dir.
+# Whether every package loads from $env_dir.
 loads() {
-    (cd "$env_dir" && node -e 'require("@foxglove/schemas/jsonschema"); require("ajv")') >/dev/null 2>&1
+    (cd "$env_dir" && node -e 'require("@foxglove/schemas/jsonschema"); require("ajv"); require("@foxglove/ws-protocol"); require("ws")') >/dev/null 2>&1
 }
 
 for tool in node npm; do
     if ! command -v "$tool" >/dev/null 2>&1; then
-        echo "node-env: no $tool on PATH, so no $env_dir (the Foxglove schema test will be skipped)"
+        echo "node-env: no $tool on PATH, so no $env_dir (the Foxglove schema and client tests will be skipped)"
         exit 0
     fi
 done
@@ -37,7 +39,7 @@ if ! (cd "$env_dir" && npm ci --no-audit --no-fund) >"$log" 2>&1; then
     exit 0
 fi
 if ! loads; then
-    echo "node-env: installed, but @foxglove/schemas or ajv does not load (see $log)"
+    echo "node-env: installed, but @foxglove/schemas, ajv, @foxglove/ws-protocol or ws does not load (see $log)"
     exit 0
 fi
-echo "node-env: $(cd "$env_dir" && node -p '["@foxglove/schemas", "ajv"].map((p) => p + " " + require(p + "/package.json").version).join(" and ")') ready in $env_dir"
+echo "node-env: $(cd "$env_dir" && node -p '["@foxglove/schemas", "ajv", "@foxglove/ws-protocol", "ws"].map((p) => p + " " + require(p + "/package.json").version).join(", ")') ready in $env_dir"

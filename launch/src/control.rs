@@ -6,8 +6,8 @@ use crate::swap::split_words;
 use clap::Args;
 use mole_runtime::ControlClient;
 use mole_types::{
-    CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP, CONTROL_SWAP, ControlRequest,
-    ControlResponse, read_name, write_name,
+    CONTROL_OK, CONTROL_REFUSED, CONTROL_STATUS, CONTROL_STOP, ControlRequest, ControlResponse,
+    read_name,
 };
 use std::time::Duration;
 
@@ -66,30 +66,10 @@ pub fn swap(args: &SwapArgs) -> Result<(), Failure> {
         [one] => split_words(one).map_err(|e| Failure::input(format!("COMMAND: {e}")))?,
         words => words.to_vec(),
     };
-    if argv.is_empty() {
-        return Err(Failure::input("COMMAND is empty"));
-    }
     let cwd = std::env::current_dir()
         .map_err(|e| Failure::run(format!("cannot read the current directory: {e}")))?;
-    let mut request = ControlRequest::new(CONTROL_SWAP);
-    write_name(&mut request.role, &args.role);
-    if read_name(&request.role) != args.role.as_str() {
-        return Err(Failure::input(format!("ROLE `{}` is too long", args.role)));
-    }
-    let cwd = cwd.display().to_string();
-    write_name(&mut request.cwd, &cwd);
-    if read_name(&request.cwd) != cwd.as_str() {
-        return Err(Failure::input(format!(
-            "the current directory's path is longer than {} bytes",
-            request.cwd.len()
-        )));
-    }
-    if !request.set_argv(&argv) {
-        return Err(Failure::input(format!(
-            "COMMAND is longer than {} bytes or holds a NUL byte",
-            request.argv.len()
-        )));
-    }
+    let request = ControlRequest::swap(&args.role, &cwd.display().to_string(), &argv)
+        .map_err(Failure::input)?;
     let response = call(&args.namespace, request, args.timeout)?;
     println!("{}", answer(&response)?);
     Ok(())

@@ -13,7 +13,8 @@ pub mod plot;
 
 use crate::Failure;
 use crate::parse_swap;
-use crate::up::{RunEnd, build_process_binaries, choices};
+use crate::sidecar::build_process_binaries;
+use crate::up::{RunEnd, choices};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use metrics::{Aggregate, WorldInfo, WorldMetrics, aggregate, regressions};
@@ -221,7 +222,7 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
     // Named before the build: under `cargo run -p mole-launch` the workspace build relinks this
     // very binary, and the running one's own path then reads as deleted.
     let mole = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("mole"));
-    build_process_binaries(false)?;
+    build_process_binaries(&[])?;
     let started = std::time::Instant::now();
     let (results, interrupted) = run_all(args, &mole, &suite, jobs);
     let report = EvalReport {

@@ -14,7 +14,7 @@ use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
 use mole_launch::top::{TopArgs, top};
 use mole_launch::up::{UpArgs, up};
-use mole_launch::view::{ViewArgs, view};
+use mole_launch::view::{FOXGLOVE, VIEW, ViewArgs, view};
 use std::process::ExitCode;
 
 /// Start, supervise and measure the mole robot stack
@@ -51,6 +51,8 @@ enum MoleCommand {
     /// Serve a live view of a running stack (or of a recording FILE, with a timeline) in a
     /// browser, until Ctrl-C or the stack ends.
     View(ViewArgs),
+    /// Serve a running stack (or a recording FILE) to the Foxglove app or Lichtblick.
+    Foxglove(ViewArgs),
     /// Describe a recording: duration, ticks, topics with counts and rates, metadata.
     Info(InfoArgs),
     /// Write a recording again for other tools: with Foxglove's well-known schemas (JSON), so
@@ -88,7 +90,8 @@ fn main() -> ExitCode {
         MoleCommand::Top(args) => top(&args),
         MoleCommand::Record(args) => record(&args),
         MoleCommand::Replay(args) => replay(&args),
-        MoleCommand::View(args) => view(&args),
+        MoleCommand::View(args) => view(VIEW, &args),
+        MoleCommand::Foxglove(args) => view(FOXGLOVE, &args),
         MoleCommand::Info(args) => info(&args),
         MoleCommand::Export(args) => export(&args),
         MoleCommand::Bench(command) => bench(&command),

@@ -190,6 +190,7 @@ pub fn replay(args: &ReplayArgs) -> Result<(), Failure> {
             false => Vec::new(),
         },
         view: Default::default(),
+        foxglove: Default::default(),
         stand_in: Some(Box::new(StandIn {
             cast: cast.clone(),
             args: player_args,

@@ -221,3 +221,52 @@ fn stack_runs(namespace: &str) -> bool {
     let launcher = format!("mole/{namespace}/{LAUNCHER}");
     live_nodes_in_namespace(namespace).contains(&launcher)
 }
+
+/// The packages built only for a run that uses them: the bridge brings zenoh, the Foxglove
+/// server Foxglove's SDK.
+const OPTIONAL_PACKAGES: [&str; 2] = ["mole-bridge", "mole-foxglove"];
+
+/// When started through `cargo run`, builds every process binary too (cargo builds only the
+/// package it runs), so `mole` never starts a stale or missing process; of the
+/// [`OPTIONAL_PACKAGES`] only those in `wanted`.
+pub fn build_process_binaries(wanted: &[&str]) -> Result<(), Failure> {
+    let (Some(cargo), Ok(exe)) = (std::env::var_os("CARGO"), std::env::current_exe()) else {
+        return Ok(());
+    };
+    let Some(manifest_dir) = std::env::var_os("CARGO_MANIFEST_DIR") else {
+        return Ok(());
+    };
+    let profile = exe
+        .parent()
+        .and_then(|d| d.file_name())
+        .and_then(|n| n.to_str())
+        .unwrap_or("debug");
+    let mut command = std::process::Command::new(cargo);
+    command
+        .current_dir(manifest_dir)
+        .args(["build", "--workspace", "--bins", "--quiet"]);
+    for package in OPTIONAL_PACKAGES.iter().filter(|p| !wanted.contains(p)) {
+        command.args(["--exclude", package]);
+    }
+    if profile != "debug" {
+        command.args([
+            "--profile",
+            if profile == "release" {
+                "release"
+            } else {
+                profile
+            },
+        ]);
+    }
+    tracing::info!("building the process binaries ({profile})");
+    let status = command
+        .status()
+        .map_err(|e| Failure::run(format!("cannot run cargo: {e}")))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(Failure::run(
+            "building the process binaries failed (see cargo's output above)",
+        ))
+    }
+}

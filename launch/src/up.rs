@@ -18,7 +18,7 @@ use crate::record::{RecordPlan, Recorder};
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::supervisor::last_error_line;
-use crate::view::{UpViewArgs, View, ViewPlan};
+use crate::view::{UpFoxgloveArgs, UpViewArgs, View, ViewPlan};
 use crate::{
     ChildSpec, ExitStatus, LaunchFile, RestartWhen, Supervisor, SupervisorEvent, resolve_program,
     start_order, stop_order,
@@ -136,6 +136,8 @@ pub struct UpArgs {
     pub record_every: Vec<String>,
     #[command(flatten)]
     pub view: UpViewArgs,
+    #[command(flatten)]
+    pub foxglove: UpFoxgloveArgs,
     /// `mole replay`: the player in the place of the roles it plays back.
     #[arg(skip)]
     pub stand_in: Option<Box<crate::stand_in::StandIn>>,
@@ -177,51 +179,6 @@ impl RunEnd {
     }
 }
 
-/// When started through `cargo run`, builds every process binary too (cargo builds only the
-/// package it runs), so `mole` never starts a stale or missing process.
-pub(crate) fn build_process_binaries(with_bridge: bool) -> Result<(), Failure> {
-    let (Some(cargo), Ok(exe)) = (std::env::var_os("CARGO"), std::env::current_exe()) else {
-        return Ok(());
-    };
-    let Some(manifest_dir) = std::env::var_os("CARGO_MANIFEST_DIR") else {
-        return Ok(());
-    };
-    let profile = exe
-        .parent()
-        .and_then(|d| d.file_name())
-        .and_then(|n| n.to_str())
-        .unwrap_or("debug");
-    let mut command = std::process::Command::new(cargo);
-    command
-        .current_dir(manifest_dir)
-        .args(["build", "--workspace", "--bins", "--quiet"]);
-    // The bridge brings zenoh: built only for a stack split across machines.
-    if !with_bridge {
-        command.args(["--exclude", "mole-bridge"]);
-    }
-    if profile != "debug" {
-        command.args([
-            "--profile",
-            if profile == "release" {
-                "release"
-            } else {
-                profile
-            },
-        ]);
-    }
-    tracing::info!("building the process binaries ({profile})");
-    let status = command
-        .status()
-        .map_err(|e| Failure::run(format!("cannot run cargo: {e}")))?;
-    if status.success() {
-        Ok(())
-    } else {
-        Err(Failure::run(
-            "building the process binaries failed (see cargo's output above)",
-        ))
-    }
-}
-
 /// What a run leaves besides its files.
 pub struct RunOutcome {
     /// summary.json of the run.
@@ -247,8 +204,13 @@ pub fn up(args: &UpArgs) -> Result<RunOutcome, Failure> {
         )?),
         None => None,
     };
-    let viewing = args.view.plan()?;
-    let mut stack = start(args, plan, recording, viewing)?;
+    let servers = [args.view.plan()?, args.foxglove.plan()?];
+    let mut stack = start(
+        args,
+        plan,
+        recording,
+        servers.into_iter().flatten().collect(),
+    )?;
     let end = supervise(&mut stack);
     finish(stack, end)
 }
@@ -321,8 +283,8 @@ struct Stack<'a> {
     supervisor: Supervisor,
     /// `--record`: the recorder beside the stack.
     recorder: Option<Recorder>,
-    /// `--view`: the view beside the stack.
-    view: Option<View>,
+    /// `--view`, `--foxglove`: the servers beside the stack.
+    servers: Vec<View>,
     /// `mole fault`: the faults injected, and the processes a fault holds stopped.
     faults: Injector,
     /// `mole param`: the settings in force, changed while the stack runs.

@@ -1,18 +1,19 @@
-//! The live view: `mole view` (attached to a running stack) and `mole up --view`, which starts it
-//! beside the stack; and `mole view FILE`, a recording in the same view, with a timeline.
+//! The servers that show a stack: the live view (`mole view`, `mole up --view`; `mole view FILE`
+//! for a recording, with a timeline) and the Foxglove server (`mole foxglove`, `mole up
+//! --foxglove`; `mole foxglove FILE` for a recording, with playback control).
 //!
-//! The view is its own process (`mole-view`), an observer of the stack that is none of its roles:
-//! a [`Sidecar`], stopped after every role; if it dies the run goes on without it, with a
-//! warning. It writes its page's URL into a file once it serves; the launcher prints it as
-//! `view: URL`. A recording's view (`mole-view --file FILE`) needs no stack and opens no IPC: the
-//! launcher only starts it, prints its URL and stops it at Ctrl-C.
+//! Each is its own process (`mole-view`, `mole-foxglove`), an observer of the stack that is none
+//! of its roles: a [`Sidecar`], stopped after every role; if it dies the run goes on without it,
+//! with a warning. It writes its URL into a file once it serves; the launcher prints it as
+//! `view: URL` or `foxglove: URL`. A recording's server (`--file FILE`) needs no stack and opens
+//! no IPC: the launcher only starts it, prints its URL and stops it at Ctrl-C.
 
 use crate::Failure;
 use crate::sidecar::{self, Attached, Sidecar};
 use crate::{RestartPolicy, RestartWhen};
 use clap::Args;
 use mole_types::env;
-use mole_view::{DEFAULT_PORT, VIEW_PROGRAM};
+use mole_types::graph::nodes;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -20,10 +21,40 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-/// The view's name in its log file and its supervisor.
-const VIEW: &str = mole_types::graph::nodes::VIEW;
-/// Beside `mole up` a view that died is started again (the page reconnects by itself), on the
-/// same port; after five restarts the run goes on without it.
+/// A server that shows the stack.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Server {
+    /// Its name in its log file, its supervisor and the launcher's output (`view: URL`).
+    pub name: &'static str,
+    pub program: &'static str,
+    pub default_port: u16,
+    /// What a client of it is (for the warning about an address beyond this machine).
+    pub client: &'static str,
+    /// How the run goes on once it gave up restarting it.
+    pub without: &'static str,
+}
+
+/// The live view in a browser.
+pub const VIEW: Server = Server {
+    name: nodes::VIEW,
+    program: mole_view::VIEW_PROGRAM,
+    default_port: mole_view::DEFAULT_PORT,
+    client: "a page",
+    without: "without the view",
+};
+
+/// The Foxglove server, for the Foxglove app and Lichtblick (its crate's program and port: the
+/// launcher does not depend on it, a test checks them).
+pub const FOXGLOVE: Server = Server {
+    name: nodes::FOXGLOVE,
+    program: "mole-foxglove",
+    default_port: 8765,
+    client: "a Foxglove client",
+    without: "without the Foxglove server",
+};
+
+/// Beside `mole up` a server that died is started again (a page or Foxglove reconnects by
+/// itself), on the same port; after five restarts the run goes on without it.
 const RESTART: RestartPolicy = RestartPolicy {
     policy: RestartWhen::OnFailure,
     backoff_ms: 200,
@@ -32,17 +63,18 @@ const RESTART: RestartPolicy = RestartPolicy {
     stable_after_ms: 10_000,
 };
 
-/// Where and how the view serves (`mole view`'s flags; `mole up --view[=PORT]`).
+/// Where and how a server serves (`mole view`'s and `mole foxglove`'s flags).
 #[derive(Debug, Clone, Args)]
 pub struct ServeArgs {
-    /// The port to serve the page on (0: any free port).
-    #[arg(long, default_value_t = DEFAULT_PORT)]
-    pub port: u16,
+    /// The port to serve on (default: the view 7777, Foxglove 8765; 0: any free port).
+    #[arg(long)]
+    pub port: Option<u16>,
     /// The address to serve on. Anything but loopback lets anyone who can reach it watch the
     /// run and, unless --no-controls, steer the robot.
     #[arg(long, default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
     pub bind: IpAddr,
-    /// No goals, pauses or steps from the page: it only watches.
+    /// No goals, pauses or steps (and with Foxglove no setting changes or swaps) from clients:
+    /// they only watch.
     #[arg(long)]
     pub no_controls: bool,
 }
@@ -75,54 +107,104 @@ pub struct UpViewArgs {
     pub no_controls: bool,
 }
 
+/// `mole up`'s flags for the Foxglove server beside the stack.
+#[derive(Debug, Clone, Default, Args)]
+pub struct UpFoxgloveArgs {
+    /// Serve the run to the Foxglove app (or Lichtblick) over the Foxglove WebSocket protocol,
+    /// on PORT (default 8765; 0: any free port); its URL is printed as `foxglove: URL`.
+    #[arg(id = "foxglove", long = "foxglove", value_name = "PORT", num_args = 0..=1, require_equals = true)]
+    pub port: Option<Option<u16>>,
+    /// With --foxglove: the address to serve on (default 127.0.0.1; anything else lets anyone
+    /// who can reach it watch and, unless --foxglove-no-controls, steer the robot, change its
+    /// settings and swap its processes).
+    #[arg(
+        id = "foxglove_bind",
+        long = "foxglove-bind",
+        value_name = "ADDR",
+        requires = "foxglove"
+    )]
+    pub bind: Option<IpAddr>,
+    /// With --foxglove: no goals, paces, setting changes or swaps from clients.
+    #[arg(
+        id = "foxglove_no_controls",
+        long = "foxglove-no-controls",
+        requires = "foxglove"
+    )]
+    pub no_controls: bool,
+}
+
+/// The server `server` to start beside the stack, if its flag (`port`) asks for one.
+fn plan_beside(
+    server: Server,
+    port: Option<Option<u16>>,
+    bind: Option<IpAddr>,
+    no_controls: bool,
+) -> Result<Option<ViewPlan>, Failure> {
+    let Some(port) = port else {
+        return Ok(None);
+    };
+    let serve = ServeArgs {
+        port,
+        bind: bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST)),
+        no_controls,
+    };
+    ViewPlan::new(server, serve).map(Some)
+}
+
 impl UpViewArgs {
     /// The view to start beside the stack, if --view asks for one.
     pub fn plan(&self) -> Result<Option<ViewPlan>, Failure> {
-        let Some(port) = self.port else {
-            return Ok(None);
-        };
-        ViewPlan::new(ServeArgs {
-            port: port.unwrap_or(DEFAULT_PORT),
-            bind: self.bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST)),
-            no_controls: self.no_controls,
-        })
-        .map(Some)
+        plan_beside(VIEW, self.port, self.bind, self.no_controls)
+    }
+}
+
+impl UpFoxgloveArgs {
+    /// The Foxglove server to start beside the stack, if --foxglove asks for one.
+    pub fn plan(&self) -> Result<Option<ViewPlan>, Failure> {
+        plan_beside(FOXGLOVE, self.port, self.bind, self.no_controls)
     }
 }
 
 impl ServeArgs {
+    fn port(&self, server: Server) -> u16 {
+        self.port.unwrap_or(server.default_port)
+    }
+
     /// Refuses, before anything starts, a port that something else serves on already (0, any
-    /// free port, always works). `flag` is the option that named it.
-    fn check_port(&self, flag: &str) -> Result<(), Failure> {
-        if self.port == 0 {
+    /// free port, always works).
+    fn check_port(&self, server: Server) -> Result<(), Failure> {
+        let port = self.port(server);
+        if port == 0 {
             return Ok(());
         }
-        let address = SocketAddr::new(self.bind, self.port);
+        let address = SocketAddr::new(self.bind, port);
         std::net::TcpListener::bind(address).map(drop).map_err(|e| {
             Failure::input(format!(
-                "{flag}={}: cannot serve the view on {address}: {e}; expected a free port (0 \
-                 takes any)",
-                self.port
+                "--{}={port}: cannot serve {} on {address}: {e}; expected a free port (0 takes \
+                 any)",
+                server.name, server.name
             ))
         })
     }
 
-    /// The view's arguments; warns when the page is served beyond this machine.
-    fn view_args(&self, ready: &Path) -> Vec<String> {
+    /// The server's arguments; warns when it serves beyond this machine.
+    fn server_args(&self, server: Server, ready: &Path) -> Vec<String> {
         if !self.bind.is_loopback() {
             let steer = if self.no_controls {
                 "watch the run"
             } else {
-                "watch the run and steer the robot (goals, pause, step; --no-controls turns that off)"
+                "watch the run and steer the robot (--no-controls turns that off)"
             };
             tracing::warn!(
-                "the view serves on {}: anyone who can reach it can {steer}",
-                self.bind
+                "{} serves on {}: anyone who can reach it as {} can {steer}",
+                server.name,
+                self.bind,
+                server.client
             );
         }
         let mut args = vec![
             "--port".to_string(),
-            self.port.to_string(),
+            self.port(server).to_string(),
             "--bind".to_string(),
             self.bind.to_string(),
             "--ready-file".to_string(),
@@ -135,108 +217,125 @@ impl ServeArgs {
     }
 }
 
-/// The file the view writes its URL into, fresh (a stale one removed).
-fn ready_file() -> PathBuf {
-    let file = std::env::temp_dir().join(format!("mole-view-{}.url", std::process::id()));
+/// The file `server` writes its URL into, fresh (a stale one removed).
+fn ready_file(server: Server) -> PathBuf {
+    let name = format!("mole-{}-{}.url", server.name, std::process::id());
+    let file = std::env::temp_dir().join(name);
     let _ = std::fs::remove_file(&file);
     file
 }
 
-/// Reads the URL the view wrote, prints it as `view: URL` and removes the file.
-fn announce(ready: &Path) -> bool {
+/// Reads the URL `server` wrote, prints it as `NAME: URL` and removes the file.
+fn announce(server: Server, ready: &Path) -> bool {
     let Ok(url) = std::fs::read_to_string(ready) else {
         return false;
     };
     let _ = std::fs::remove_file(ready);
-    println!("view: {}", url.trim());
+    println!("{}: {}", server.name, url.trim());
     true
 }
 
-/// What `mole up --view` serves with, checked before anything starts.
+/// What `mole up --view` or `--foxglove` serves with, checked before anything starts.
 pub struct ViewPlan {
+    server: Server,
     program: PathBuf,
     serve: ServeArgs,
 }
 
 impl ViewPlan {
-    /// The view `serve` asks for: its program found and its port free, or exit 2.
-    pub fn new(serve: ServeArgs) -> Result<ViewPlan, Failure> {
-        serve.check_port("--view")?;
+    /// The server's name.
+    pub fn name(&self) -> &'static str {
+        self.server.name
+    }
+
+    /// The `server` `serve` asks for: its program found and its port free, or exit 2.
+    pub fn new(server: Server, serve: ServeArgs) -> Result<ViewPlan, Failure> {
+        serve.check_port(server)?;
         Ok(ViewPlan {
-            program: sidecar::program(VIEW_PROGRAM)?,
+            server,
+            program: sidecar::program(server.program)?,
             serve,
         })
     }
 
-    /// Starts the view with the stack's environment, waits until it serves and prints its URL.
-    /// Port 0 is made a free port here, so that a restarted view serves where the page looks.
+    /// Starts the server with the stack's environment, waits until it serves and prints its
+    /// URL. Port 0 is made a free port here, so that a restarted server serves where its
+    /// clients look.
     pub fn start(mut self, env: &[(String, String)], log_path: PathBuf) -> Result<View, Failure> {
-        if self.serve.port == 0 {
-            self.serve.port = std::net::TcpListener::bind((self.serve.bind, 0))
+        let server = self.server;
+        if self.serve.port(server) == 0 {
+            let port = std::net::TcpListener::bind((self.serve.bind, 0))
                 .and_then(|l| l.local_addr())
-                .map_err(|e| Failure::run(format!("no free port for the view: {e}")))?
+                .map_err(|e| Failure::run(format!("no free port for {}: {e}", server.name)))?
                 .port();
+            self.serve.port = Some(port);
         }
-        let ready = ready_file();
-        let args = self.serve.view_args(&ready);
+        let ready = ready_file(server);
+        let args = self.serve.server_args(server, &ready);
         let sidecar = Sidecar::start(
-            VIEW,
-            "without the view",
+            server.name,
+            server.without,
             (self.program, args),
             RESTART,
             env,
             log_path,
             &ready,
         )?;
-        announce(&ready);
-        Ok(View { sidecar, ready })
+        announce(server, &ready);
+        Ok(View {
+            server,
+            sidecar,
+            ready,
+        })
     }
 }
 
-/// The view beside a stack that `mole up` runs.
+/// A server beside a stack that `mole up` runs.
 pub struct View {
+    server: Server,
     sidecar: Sidecar,
     /// Where it writes its URL once it serves (again after a restart).
     ready: PathBuf,
 }
 
 impl View {
-    /// Restarts a view that died, by [`RESTART`]; warns when the run goes on without it.
+    /// Restarts a server that died, by [`RESTART`]; warns when the run goes on without it.
     pub fn check(&mut self) {
         self.sidecar.check();
     }
 
-    /// Stops the view.
+    /// Stops the server.
     pub fn stop(self, timeout: Duration) {
         if self.sidecar.stop(timeout) {
-            tracing::warn!("the view needed SIGKILL");
+            tracing::warn!("{} needed SIGKILL", self.server.name);
         }
         let _ = std::fs::remove_file(&self.ready);
     }
 }
 
-/// `mole view --namespace NS`: serves the page of the running stack in NS until Ctrl-C or the
-/// stack ends; `mole view FILE`: the page of a recording, until Ctrl-C.
-pub fn view(args: &ViewArgs) -> Result<(), Failure> {
+/// `mole view --namespace NS` (`mole foxglove …`): serves the running stack in NS until Ctrl-C
+/// or the stack ends; `mole view FILE`: a recording, until Ctrl-C.
+pub fn view(server: Server, args: &ViewArgs) -> Result<(), Failure> {
+    sidecar::build_process_binaries(&[server.program])?;
     if let Some(file) = &args.file {
-        return view_recording(file, &args.serve);
+        return view_recording(server, file, &args.serve);
     }
-    let program = sidecar::program(VIEW_PROGRAM)?;
+    let program = sidecar::program(server.program)?;
     let stack = Attached::to(&args.namespace)?;
-    let ready = ready_file();
+    let ready = ready_file(server);
     let child = Command::new(program)
-        .args(args.serve.view_args(&ready))
+        .args(args.serve.server_args(server, &ready))
         .env(env::NAMESPACE, &args.namespace)
         .env(env::MODE, stack.mode.name())
         .stdin(Stdio::null())
         .spawn()
-        .map_err(|e| Failure::run(format!("cannot start {VIEW_PROGRAM}: {e}")))?;
+        .map_err(|e| Failure::run(format!("cannot start {}: {e}", server.program)))?;
     let mut announced = false;
-    let result = stack.wait(VIEW, child, || {
-        if !announced && announce(&ready) {
+    let result = stack.wait(server.name, child, || {
+        if !announced && announce(server, &ready) {
             announced = true;
             println!(
-                "viewing the {} stack in `{}` (Ctrl-C to stop)",
+                "serving the {} stack in `{}` (Ctrl-C to stop)",
                 stack.mode, args.namespace
             );
         }
@@ -245,36 +344,41 @@ pub fn view(args: &ViewArgs) -> Result<(), Failure> {
     result.map(drop)
 }
 
-/// `mole view FILE`: the view of a recording, no stack and no IPC. The view reads the file before
-/// it serves: a file it refuses ends it with exit 2, its reason (naming the file) on stderr.
-fn view_recording(file: &Path, serve: &ServeArgs) -> Result<(), Failure> {
+/// `mole view FILE`: a recording, no stack and no IPC. The server reads the file before it
+/// serves: a file it refuses ends it with exit 2, its reason (naming the file) on stderr.
+fn view_recording(server: Server, file: &Path, serve: &ServeArgs) -> Result<(), Failure> {
     if serve.no_controls {
         return Err(Failure::input(
-            "--no-controls: a recording's view has no goals or paces to turn off (only its \
-             timeline, which steers nothing)",
+            "--no-controls: a recording has no goals or paces to turn off (only its timeline, \
+             which steers nothing)",
         ));
     }
-    let program = sidecar::program(VIEW_PROGRAM)?;
+    let program = sidecar::program(server.program)?;
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .map_err(|e| Failure::run(format!("cannot install the Ctrl-C handler: {e}")))?;
-    let ready = ready_file();
+    let ready = ready_file(server);
     let mut child = Command::new(program)
-        .args(serve.view_args(&ready))
+        .args(serve.server_args(server, &ready))
         .arg("--file")
         .arg(file)
         .stdin(Stdio::null())
         .spawn()
-        .map_err(|e| Failure::run(format!("cannot start {VIEW_PROGRAM}: {e}")))?;
+        .map_err(|e| Failure::run(format!("cannot start {}: {e}", server.program)))?;
     let (mut announced, mut stopping) = (false, false);
     let status = loop {
         match child.try_wait() {
             Ok(Some(status)) => break Ok(status),
             Ok(None) => {}
-            Err(e) => break Err(Failure::run(format!("cannot wait for the view: {e}"))),
+            Err(e) => {
+                break Err(Failure::run(format!(
+                    "cannot wait for {}: {e}",
+                    server.name
+                )));
+            }
         }
-        if !announced && announce(&ready) {
+        if !announced && announce(server, &ready) {
             announced = true;
             println!("viewing the recording {} (Ctrl-C to stop)", file.display());
         }
@@ -290,9 +394,22 @@ fn view_recording(file: &Path, serve: &ServeArgs) -> Result<(), Failure> {
     match status.code() {
         Some(0) => Ok(()),
         Some(crate::supervisor::EXIT_BAD_INPUT) => Err(Failure::input(format!(
-            "the view refused {} (see above)",
+            "{} refused {} (see above)",
+            server.name,
             file.display()
         ))),
-        _ => Err(Failure::run(format!("the view failed ({status})"))),
+        _ => Err(Failure::run(format!("{} failed ({status})", server.name))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The launcher starts the Foxglove server its crate declares, where it serves by default.
+    #[test]
+    fn the_foxglove_server_is_the_one_its_crate_declares() {
+        assert_eq!(FOXGLOVE.program, mole_foxglove::FOXGLOVE_PROGRAM);
+        assert_eq!(FOXGLOVE.default_port, mole_foxglove::DEFAULT_PORT);
     }
 }

@@ -32,7 +32,7 @@ fn help_lists_every_subcommand() {
         listed_subcommands(&[]),
         [
             "up", "swap", "stop", "status", "fault", "param", "top", "record", "replay", "view",
-            "info", "export", "eval", "g2o", "bench", "doctor", "new", "help"
+            "foxglove", "info", "export", "eval", "g2o", "bench", "doctor", "new", "help"
         ]
     );
     assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);

@@ -1,8 +1,9 @@
 //! `cargo run -p mole-launch` reuses what `cargo build --workspace` built, instead of compiling part
 //! of the tree again: cargo shares a built crate only between builds that resolve it to the same
 //! features, so the launcher alone must resolve every crate it needs as the whole workspace does.
-//! The bridge (`mole-bridge`, zenoh) is left out of both: `mole up` builds it only for a stack
-//! that has one, so zenoh's choice of features is not forced on every other build.
+//! The bridge (`mole-bridge`, zenoh) and the Foxglove server (`mole-foxglove`, Foxglove's SDK)
+//! are left out of both: `mole up` builds each only for a run that uses it, so their choice of
+//! features is not forced on every other build.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::process::Command;
@@ -45,7 +46,11 @@ fn resolved_features(selection: &[&str]) -> BTreeMap<String, BTreeSet<String>> {
 #[test]
 fn launcher_resolves_each_crate_as_the_workspace_does() {
     let launcher = resolved_features(&["--package=mole-launch"]);
-    let workspace = resolved_features(&["--workspace", "--exclude=mole-bridge"]);
+    let workspace = resolved_features(&[
+        "--workspace",
+        "--exclude=mole-bridge",
+        "--exclude=mole-foxglove",
+    ]);
     assert!(
         launcher.contains_key(&format!(
             "mole-launch v{} ({})",

@@ -4,7 +4,7 @@
 //! travels on to its process as a [`ParamChange`] on `stack/params`.
 
 use crate::messages::{Header, NAME_LEN};
-use crate::{Invalid, Message, within};
+use crate::{Invalid, Message, read_name, within, write_name};
 use bytemuck::{Pod, Zeroable};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -71,6 +71,33 @@ impl ControlRequest {
         }
         self.n_args = words.len() as u32;
         true
+    }
+
+    /// A swap of `role` for the command `argv`, run in `cwd`; refused, saying which, when a
+    /// part does not fit its field (or holds a NUL byte).
+    pub fn swap<S: AsRef<str>>(role: &str, cwd: &str, argv: &[S]) -> Result<Self, String> {
+        let mut request = Self::new(CONTROL_SWAP);
+        write_name(&mut request.role, role);
+        if read_name(&request.role) != role {
+            return Err(format!("the role `{role}` is too long"));
+        }
+        write_name(&mut request.cwd, cwd);
+        if read_name(&request.cwd) != cwd {
+            return Err(format!(
+                "the current directory's path is longer than {} bytes",
+                request.cwd.len()
+            ));
+        }
+        if argv.is_empty() {
+            return Err("the command is empty".to_string());
+        }
+        if !request.set_argv(argv) {
+            return Err(format!(
+                "the command is longer than {} bytes or holds a NUL byte",
+                request.argv.len()
+            ));
+        }
+        Ok(request)
     }
 
     /// The words of `argv`, `None` when `n_args` does not match or a word is not UTF-8.

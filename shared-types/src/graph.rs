@@ -41,6 +41,8 @@ pub mod nodes {
     pub const VIEW: &str = "view";
     /// `mole-bridge`: one in each half of a split stack.
     pub const BRIDGE: &str = "bridge";
+    /// `mole-foxglove`, started by `mole up --foxglove` or `mole foxglove`.
+    pub const FOXGLOVE: &str = "foxglove";
 }
 
 /// Whether `mole swap` may replace a role while the stack runs.

@@ -11,7 +11,7 @@ pub(super) fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failur
         keeper,
         mut supervisor,
         recorder,
-        view,
+        servers,
         faults,
         tuner,
         watch,
@@ -38,8 +38,8 @@ pub(super) fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failur
     if let Some(recorder) = recorder {
         recorder.stop(timeout);
     }
-    if let Some(view) = view {
-        view.stop(timeout);
+    for server in servers {
+        server.stop(timeout);
     }
     drop(ports);
     keeper.stop();

@@ -57,7 +57,11 @@ pub(super) fn prepare(args: &UpArgs) -> Result<Plan, Failure> {
     };
     let seed = args.seed.unwrap_or(launch.stack.seed);
     refuse_namespace_in_use(&args.namespace)?;
-    super::build_process_binaries(launch.bridge.is_some())?;
+    let wanted = [
+        launch.bridge.is_some().then_some("mole-bridge"),
+        args.foxglove.port.is_some().then_some("mole-foxglove"),
+    ];
+    crate::sidecar::build_process_binaries(&wanted.into_iter().flatten().collect::<Vec<_>>())?;
     let beside = std::env::current_exe()
         .ok()
         .and_then(|p| p.parent().map(Path::to_path_buf))

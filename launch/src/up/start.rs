@@ -3,13 +3,13 @@
 
 use super::*;
 
-/// Opens the launcher's ports, starts the recorder and the view (if any) and every process once
+/// Opens the launcher's ports, starts the recorder and the servers (if any) and every process once
 /// those it depends on are ready.
 pub(super) fn start(
     args: &UpArgs,
     plan: Plan,
     recording: Option<RecordPlan>,
-    viewing: Option<ViewPlan>,
+    servers: Vec<ViewPlan>,
 ) -> Result<Stack<'_>, Failure> {
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();
@@ -29,9 +29,13 @@ pub(super) fn start(
     let recorder = recording
         .map(|r| r.start(&plan.env, log_of(args, nodes::RECORDER)))
         .transpose()?;
-    let view = viewing
-        .map(|v| v.start(&plan.env, log_of(args, nodes::VIEW)))
-        .transpose()?;
+    let servers = servers
+        .into_iter()
+        .map(|s| {
+            let log = log_of(args, s.name());
+            s.start(&plan.env, log)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let order = start_order(&plan.launch.processes).map_err(|e| Failure::input(e.to_string()))?;
     let mut stack = Stack {
         args,
@@ -39,7 +43,7 @@ pub(super) fn start(
         keeper,
         supervisor: Supervisor::new(),
         recorder,
-        view,
+        servers,
         faults,
         tuner,
         watch: Watch::new(),

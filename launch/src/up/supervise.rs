@@ -18,8 +18,8 @@ pub(super) fn supervise(stack: &mut Stack<'_>) -> RunEnd {
         if let Some(recorder) = stack.recorder.as_mut() {
             recorder.check();
         }
-        if let Some(view) = stack.view.as_mut() {
-            view.check();
+        for server in &mut stack.servers {
+            server.check();
         }
         if last_report.elapsed() >= Duration::from_secs(1) {
             last_report = Instant::now();

@@ -67,6 +67,56 @@ pub mod schemas {
     }
 }
 
+/// Every channel of the mapping, with the mole topic it comes from and its schema: what
+/// `mole export --foxglove` writes and what `mole-foxglove` serves live. The converter makes
+/// nothing else (a test checks each topic's output against this table).
+pub const CHANNELS: [Channel; 11] = {
+    use schemas::*;
+    const fn c(source: &'static str, channel: &'static str, schema: &'static str) -> Channel {
+        Channel {
+            source,
+            channel,
+            schema,
+        }
+    }
+    [
+        c(topics::WORLD_TRUTH.name, "/truth", POSE_IN_FRAME),
+        c(topics::WORLD_TRUTH.name, "/tf", FRAME_TRANSFORM),
+        c(topics::LOCALIZATION_POSE.name, "/pose", POSE_IN_FRAME),
+        c(
+            topics::LOCALIZATION_POSE.name,
+            "/pose/ellipse",
+            SCENE_UPDATE,
+        ),
+        c(topics::SENSING_SCAN.name, "/scan", LASER_SCAN),
+        c(topics::MAPPING_GRID.name, "/grid", GRID),
+        c(topics::MAPPING_CONTACT.name, "/contact", GRID),
+        c(topics::WORLD_MAP.name, "/map", SCENE_UPDATE),
+        c(topics::PLANNING_STATUS.name, "/path", SCENE_UPDATE),
+        c(
+            topics::LOCALIZATION_PARTICLES.name,
+            "/particles",
+            SCENE_UPDATE,
+        ),
+        c(
+            topics::LOCALIZATION_LANDMARKS.name,
+            "/landmarks",
+            SCENE_UPDATE,
+        ),
+    ]
+};
+
+/// One channel of the mapping.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Channel {
+    /// The mole topic its messages are made from.
+    pub source: &'static str,
+    /// Its name in Foxglove.
+    pub channel: &'static str,
+    /// Its well-known schema.
+    pub schema: &'static str,
+}
+
 /// One exported message: the channel it goes on, its schema and its JSON.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Converted {
@@ -151,6 +201,12 @@ impl Converter {
             }
             _ => Vec::new(),
         }
+    }
+
+    /// Forgets the grids exported, so the next of each is exported even if unchanged (for a
+    /// client that subscribed since).
+    pub fn forget_grids(&mut self) {
+        self.last_grid.clear();
     }
 
     /// The grid on `channel` if its content (all but the header) differs from the last one.
@@ -474,6 +530,32 @@ mod tests {
 
     fn zeroed<M: bytemuck::Zeroable>() -> M {
         M::zeroed()
+    }
+
+    /// Each topic becomes exactly the channels [`CHANNELS`] gives it, with their schemas; a
+    /// topic the table does not name becomes none.
+    #[test]
+    fn every_topic_becomes_the_channels_of_the_table() {
+        let layouts = mole_types::layout::all();
+        let mut converter = Converter::default();
+        for (topic, type_name) in topics::all() {
+            let size = layouts
+                .iter()
+                .find(|l| l.type_name == type_name)
+                .unwrap()
+                .size;
+            let made: Vec<(&str, &str)> = converter
+                .convert(topic, 1, &vec![0u8; size])
+                .iter()
+                .map(|c| (c.topic, c.schema))
+                .collect();
+            let table: Vec<(&str, &str)> = CHANNELS
+                .iter()
+                .filter(|c| c.source == topic)
+                .map(|c| (c.channel, c.schema))
+                .collect();
+            assert_eq!(made, table, "{topic}");
+        }
     }
 
     /// The yaw a planar quaternion encodes.

@@ -38,7 +38,7 @@ pub use file::{RECORDING_METADATA, RUN_METADATA, Record, RecordError, Recording,
 pub use gaps::Gaps;
 pub use info::{Info, InfoError, read_info};
 pub use metadata::{RunFacts, run_metadata, run_metadata_of, source_revision};
-pub use reading::{Reading, read_until_shutdown};
+pub use reading::{Reading, RecordSink, read_until_shutdown};
 pub use schema::{MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json};
 pub use tape::{Sample, Tape, TapeError, Window, read_tape};
 pub use taps::Taps;

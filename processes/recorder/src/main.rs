@@ -59,13 +59,13 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     // The file appears once every subscription is open: `mole up --record` waits for it before
     // it starts the stack, so no step goes unrecorded.
     let recording = Recording::create(&args.file, &topics::all(), run_facts)?;
-    let writer = WriterThread::start(recording)?;
+    let mut writer = WriterThread::start(recording)?;
 
     let waitset = ctx.waitset()?;
     let wakers = taps.wakers();
     let _attached = waitset.attach_all(&wakers)?;
     ctx.ready();
-    let reading = read_until_shutdown(&waitset, &mut ctx, &mut taps, &writer)?;
+    let reading = read_until_shutdown(&waitset, &mut ctx, &mut taps, &mut writer)?;
 
     let written = writer.finish(&mut taps, args.common.rate_hz)?;
     tracing::info!(

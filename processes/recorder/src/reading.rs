@@ -4,9 +4,9 @@
 //! Lockstep: the world's truth wakes it once a step and it drains every queue. Realtime: nothing
 //! wakes it; it drains every [`REALTIME_DRAIN`]. Either way the current chunk is closed every
 //! [`FLUSH_EVERY`]. It ends on a shutdown, or when the writer stopped (its error comes with
-//! [`WriterThread::finish`]).
+//! [`crate::WriterThread::finish`]).
 
-use crate::{Taps, WriterThread};
+use crate::{Record, Taps};
 use mole_runtime::{ClockMode, Context, RuntimeError, WaitSet, Wake};
 use std::time::{Duration, Instant};
 
@@ -26,13 +26,22 @@ pub struct Reading {
     pub drains: u64,
 }
 
-/// Reads the stack's topics into the writer until a shutdown or the writer's end (see the
+/// Where the records read from the stack go: the recorder's writer thread, or `mole-foxglove`'s
+/// channels.
+pub trait RecordSink {
+    /// Takes every record of `out`; false when the sink has stopped (the loop then ends).
+    fn send(&mut self, out: &mut Vec<Record>) -> bool;
+    /// Hands on what it holds (every [`FLUSH_EVERY`]); false when the sink has stopped.
+    fn flush(&mut self) -> bool;
+}
+
+/// Reads the stack's topics into `writer` until a shutdown or the writer's end (see the
 /// module docs); `waitset` has the taps' wakers attached.
 pub fn read_until_shutdown(
     waitset: &WaitSet,
     ctx: &mut Context,
     taps: &mut Taps,
-    writer: &WriterThread,
+    writer: &mut dyn RecordSink,
 ) -> Result<Reading, RuntimeError> {
     let lockstep = ctx.mode() == ClockMode::Lockstep;
     let mut next_drain = Instant::now();

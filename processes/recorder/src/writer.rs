@@ -1,7 +1,7 @@
 //! The recorder's writer thread: the records read from the stack go through a bounded queue to
 //! the file (chunks, LZ4), and back to the reader to be finished once it hung up.
 
-use crate::{Record, RecordError, Recording, Taps, Written};
+use crate::{Record, RecordError, RecordSink, Recording, Taps, Written};
 use std::sync::mpsc::{SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
@@ -33,14 +33,9 @@ impl WriterThread {
 
     /// Hands `out` to the writer; false when the writer has stopped (its error comes with
     /// [`WriterThread::finish`]).
-    pub fn send(&self, out: &mut Vec<Record>) -> bool {
+    fn hand_over(&self, out: &mut Vec<Record>) -> bool {
         out.drain(..)
             .all(|record| self.records.send(record).is_ok())
-    }
-
-    /// Closes the current chunk and hands it to the file; false when the writer has stopped.
-    pub fn flush(&self) -> bool {
-        self.records.send(Record::Flush).is_ok()
     }
 
     /// Writes what the taps still hold (the queues, the newest sample of every decimated topic),
@@ -53,7 +48,7 @@ impl WriterThread {
     ) -> Result<Written, Box<dyn std::error::Error>> {
         taps.drain();
         taps.last_samples();
-        self.send(&mut taps.seen.out);
+        self.hand_over(&mut taps.seen.out);
         let totals = taps.totals();
         let fallback_period_ns = (1e9 / rate_hz).round() as u64;
         let period_ns = taps.seen.period_ns.unwrap_or(fallback_period_ns);
@@ -63,5 +58,16 @@ impl WriterThread {
             .join()
             .map_err(|_| "the recorder's writer thread panicked")??;
         Ok(recording.finish(period_ns, totals)?)
+    }
+}
+
+impl RecordSink for WriterThread {
+    fn send(&mut self, out: &mut Vec<Record>) -> bool {
+        self.hand_over(out)
+    }
+
+    /// Closes the current chunk and hands it to the file.
+    fn flush(&mut self) -> bool {
+        self.records.send(Record::Flush).is_ok()
     }
 }
