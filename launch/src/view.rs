@@ -380,7 +380,7 @@ fn view_recording(server: Server, file: &Path, serve: &ServeArgs) -> Result<(), 
         }
         if !announced && announce(server, &ready) {
             announced = true;
-            println!("viewing the recording {} (Ctrl-C to stop)", file.display());
+            println!("serving the recording {} (Ctrl-C to stop)", file.display());
         }
         if !stopping && interrupted.load(Ordering::SeqCst) {
             stopping = true;

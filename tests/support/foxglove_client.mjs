@@ -8,6 +8,9 @@
 //   --run       publish a malformed message, then {"pace":"run"} on /operator (client publishing)
 //   --until NS  stop once a /truth message at log time >= NS came
 //   --set N=V   set the parameter N to the number V once subscribed
+//   --play X    (a recording) play at X times the recorded speed, from --seek NS if given; the
+//               protocol's playback control request, which this client package does not send
+//               itself, written on its socket by hand
 // With ENV_DIR alone and --versions it prints the packages' versions (a check that they load).
 import { createRequire } from "node:module";
 import path from "node:path";
@@ -58,6 +61,12 @@ function tickOffset(schema) {
 const ws = new WebSocket(url, ["foxglove.sdk.v1"]);
 const client = new FoxgloveClient({ ws });
 let finished = false;
+// Replies still awaited (parameters, a service call): the end waits for them (up to --timeout).
+const pending = new Set();
+function finishWhenAnswered() {
+  if (pending.size === 0) finish();
+  else setTimeout(finishWhenAnswered, 100);
+}
 function finish() {
   if (finished) return;
   finished = true;
@@ -92,10 +101,28 @@ client.on("advertise", (advertised) => {
   subscribed = true;
   const caps = seen.serverInfo?.capabilities ?? [];
   if (caps.includes("connectionGraph")) client.subscribeConnectionGraph();
-  if (caps.includes("parameters")) client.getParameters([], "all");
+  if (caps.includes("parameters")) {
+    pending.add("all");
+    client.getParameters([], "all");
+  }
   if (set && caps.includes("parameters")) {
+    pending.add("set");
     const [name, v] = set.split("=");
     client.setParameters([{ name, value: Number(v) }], "set");
+  }
+  const play = value("--play", undefined);
+  if (play && caps.includes("playbackControl")) {
+    const seek = value("--seek", undefined);
+    const id = new TextEncoder().encode("play");
+    const request = new DataView(new ArrayBuffer(1 + 1 + 4 + 1 + 8 + 4 + id.length));
+    request.setUint8(0, 3); // op: playback control request
+    request.setUint8(1, 0); // play
+    request.setFloat32(2, Number(play), true);
+    request.setUint8(6, seek === undefined ? 0 : 1);
+    request.setBigUint64(7, BigInt(seek ?? 0), true);
+    request.setUint32(15, id.length, true);
+    new Uint8Array(request.buffer).set(id, 19);
+    setTimeout(() => ws.send(request.buffer), 300);
   }
   if (flag("--run")) {
     const operator = client.advertise({ topic: "/operator", encoding: "json", schemaName: "mole.Operator" });
@@ -109,17 +136,23 @@ client.on("advertiseServices", (services) => {
   for (const s of services) {
     seen.services.push(s.name);
     if (s.name === "/mole/status") {
+      pending.add("status");
       client.sendServiceCallRequest({ serviceId: s.id, callId: 1, encoding: "json", data: new TextEncoder().encode("{}") });
     }
   }
 });
 client.on("serviceCallResponse", (r) => {
   seen.status = JSON.parse(decoder.decode(r.data));
+  pending.delete("status");
 });
-client.on("serviceCallFailure", (f) => seen.errors.push(`service: ${f.message}`));
+client.on("serviceCallFailure", (f) => {
+  seen.errors.push(`service: ${f.message}`);
+  pending.delete("status");
+});
 client.on("parameterValues", (p) => {
   if (p.id === "all") seen.parameters = p.parameters;
   if (p.id === "set") seen.setParameters = p.parameters;
+  pending.delete(p.id);
 });
 client.on("connectionGraphUpdate", (g) => {
   seen.graph = { publishedTopics: g.publishedTopics, subscribedTopics: g.subscribedTopics, advertisedServices: g.advertisedServices };
@@ -131,7 +164,7 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   if (channel.encoding === "json") {
     const message = JSON.parse(decoder.decode(bytes));
     (seen.messages[channel.topic] ??= []).push({ logTime: timestamp, message });
-    if (channel.topic === "/truth" && timestamp >= until) setTimeout(finish, 300);
+    if (channel.topic === "/truth" && timestamp >= until) setTimeout(finishWhenAnswered, 300);
     return;
   }
   const offset = headerTick.get(subscriptionId);

@@ -2,7 +2,8 @@
 //! to the channels, timed by the simulated time `tick × period` as a recording times them, so
 //! a live client and `mole export --foxglove` of a recording of the same run see the same
 //! messages at the same times. The newest truth's time is the server's time. The clients'
-//! goals and paces go to `operator/goal` and `operator/pace` after each drain.
+//! goals and paces go to `operator/goal` and `operator/pace` after each drain. With no client
+//! connected the queues are read and forgotten (but the world's map, kept for the first client).
 
 use crate::server::Served;
 use mole_recorder::{Record, RecordSink};
@@ -75,5 +76,10 @@ impl RecordSink for Relay {
 
     fn flush(&mut self) -> bool {
         true
+    }
+
+    /// Only while a client is connected: otherwise the queues are read and forgotten.
+    fn wants_samples(&self) -> bool {
+        self.served.handle.client_count() > 0
     }
 }

@@ -8,6 +8,7 @@ use crate::server::{Served, playback_state};
 use mole_recorder::tape::Tape;
 use mole_view::Clock;
 use std::collections::BTreeMap;
+use std::ops::Bound;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -54,7 +55,8 @@ impl Replay {
         served.resend_subscribed();
         match self.written {
             Some(written) if seeks == self.seeks_seen && tick >= written => {
-                for samples in self.tape.steps.range(written + 1..=tick).map(|(_, s)| s) {
+                let passed = (Bound::Excluded(written), Bound::Included(tick));
+                for samples in self.tape.steps.range(passed).map(|(_, s)| s) {
                     for s in samples {
                         served.channels.log(&s.topic, s.log_time, &s.data);
                     }

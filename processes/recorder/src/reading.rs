@@ -33,6 +33,10 @@ pub trait RecordSink {
     fn send(&mut self, out: &mut Vec<Record>) -> bool;
     /// Hands on what it holds (every [`FLUSH_EVERY`]); false when the sink has stopped.
     fn flush(&mut self) -> bool;
+    /// Whether it wants the samples now (the world's map it always gets).
+    fn wants_samples(&self) -> bool {
+        true
+    }
 }
 
 /// Reads the stack's topics into `writer` until a shutdown or the writer's end (see the
@@ -54,6 +58,7 @@ pub fn read_until_shutdown(
         woken += u64::from(wake == Wake::Data);
         if lockstep || Instant::now() >= next_drain {
             drains += 1;
+            taps.seen.skip_samples = !writer.wants_samples();
             taps.drain();
             writing = writer.send(&mut taps.seen.out);
             next_drain = Instant::now() + REALTIME_DRAIN;

@@ -26,6 +26,9 @@ pub struct Seen {
     watch: ProcessWatch,
     /// Records for the writer, in the order they were read.
     pub out: Vec<Record>,
+    /// Whether samples become records: off, only the world's map does (its one sample), and
+    /// the rest is read and forgotten (a Foxglove server with no client).
+    pub skip_samples: bool,
 }
 
 impl Seen {
@@ -142,7 +145,9 @@ impl<M: Message> Tap for Typed<M> {
             *newest_written = due(tick, *last_written, *every);
             if *newest_written {
                 *last_written = Some(tick);
-                seen.out.push(record(topic, message, tick));
+                if !seen.skip_samples || topic == topics::WORLD_MAP.name {
+                    seen.out.push(record(topic, message, tick));
+                }
             } else {
                 *decimated += 1;
             }
