@@ -18,13 +18,7 @@ const TICK: u64 = 150;
 
 /// Every message of `topic` in the recording at `path`, as (log time, bytes).
 fn recorded(path: &Path, topic: &str) -> Vec<(u64, Vec<u8>)> {
-    let bytes = std::fs::read(path).expect("read the recording");
-    mcap::MessageStream::new(&bytes)
-        .expect("an MCAP file")
-        .map(|m| m.expect("a complete recording"))
-        .filter(|m| m.channel.topic == topic)
-        .map(|m| (m.log_time, m.data.into_owned()))
-        .collect()
+    mcap_messages(path, topic)
 }
 
 /// Exports the recording `run.mcap` of `run` into `foxglove.mcap` beside it with `mole export

@@ -17,26 +17,6 @@ const TICKS: u64 = 1000;
 /// The simulated step of the default scenario (ns).
 const PERIOD_NS: u64 = 10_000_000;
 
-/// `node tests/support/foxglove_client.mjs target/node-env`, or why it cannot run.
-fn foxglove_client() -> Result<Command, String> {
-    let script = workspace().join("tests/support/foxglove_client.mjs");
-    let env_dir = workspace().join("target/node-env");
-    let client = || {
-        let mut node = Command::new("node");
-        node.arg(&script).arg(&env_dir);
-        node
-    };
-    match client().arg("--versions").output() {
-        Err(e) => Err(format!("no node ({e}); Debian: apt-get install nodejs npm")),
-        Ok(out) if !out.status.success() => Err(format!(
-            "node cannot load @foxglove/ws-protocol and ws from {}; scripts/node-env.sh installs \
-             them",
-            env_dir.display()
-        )),
-        Ok(_) => Ok(client()),
-    }
-}
-
 /// The URL `mole up` printed as `foxglove: URL`.
 fn foxglove_url(lines: &std::sync::mpsc::Receiver<String>) -> String {
     let deadline = Instant::now() + Duration::from_secs(120);
@@ -52,13 +32,7 @@ fn foxglove_url(lines: &std::sync::mpsc::Receiver<String>) -> String {
 
 /// Every message of `topic` in the MCAP file `path`, by log time.
 fn by_time(path: &Path, topic: &str) -> BTreeMap<u64, Vec<u8>> {
-    let bytes = std::fs::read(path).expect("read the MCAP file");
-    mcap::MessageStream::new(&bytes)
-        .expect("an MCAP file")
-        .map(|m| m.expect("a complete file"))
-        .filter(|m| m.channel.topic == topic)
-        .map(|m| (m.log_time, m.data.into_owned()))
-        .collect()
+    mcap_messages(path, topic).into_iter().collect()
 }
 
 /// Whether two JSON values are the same, numbers compared as numbers (JavaScript writes the

@@ -24,6 +24,7 @@ pub mod new;
 pub mod param;
 pub mod record;
 pub mod replay;
+pub mod servers;
 pub mod settings;
 pub mod sidecar;
 pub mod stand_in;
@@ -32,7 +33,6 @@ pub mod supervisor;
 pub mod swap;
 pub mod top;
 pub mod up;
-pub mod view;
 
 pub use error::{Failure, FailureKind, LaunchError};
 pub use launch_file::order::{start_order, stop_order};

@@ -12,9 +12,9 @@ use mole_launch::new::{NewArgs, new};
 use mole_launch::param::{ParamArgs, param};
 use mole_launch::record::{InfoArgs, RecordArgs, info, record};
 use mole_launch::replay::{ReplayArgs, replay};
+use mole_launch::servers::{FOXGLOVE, VIEW, ViewArgs, view};
 use mole_launch::top::{TopArgs, top};
 use mole_launch::up::{UpArgs, up};
-use mole_launch::view::{FOXGLOVE, VIEW, ViewArgs, view};
 use std::process::ExitCode;
 
 /// Start, supervise and measure the mole robot stack

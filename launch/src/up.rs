@@ -15,10 +15,10 @@ use crate::inject::Injector;
 use crate::keeper::ResumeKeeper;
 use crate::param::Tuner;
 use crate::record::{RecordPlan, Recorder};
+use crate::servers::{ServerPlan, SideServer, UpFoxgloveArgs, UpViewArgs};
 use crate::stats::StatsCollector;
 use crate::supervisor::EXIT_BAD_INPUT;
 use crate::supervisor::last_error_line;
-use crate::view::{UpFoxgloveArgs, UpViewArgs, View, ViewPlan};
 use crate::{
     ChildSpec, ExitStatus, LaunchFile, RestartWhen, Supervisor, SupervisorEvent, resolve_program,
     start_order, stop_order,
@@ -284,7 +284,7 @@ struct Stack<'a> {
     /// `--record`: the recorder beside the stack.
     recorder: Option<Recorder>,
     /// `--view`, `--foxglove`: the servers beside the stack.
-    servers: Vec<View>,
+    servers: Vec<SideServer>,
     /// `mole fault`: the faults injected, and the processes a fault holds stopped.
     faults: Injector,
     /// `mole param`: the settings in force, changed while the stack runs.

@@ -612,25 +612,36 @@ fn python_importing(modules: &str, what: &str) -> Result<String, String> {
 /// ajv, as scripts/node-env.sh installs them, ready to validate an export; or why it cannot
 /// run (no node, no packages).
 pub fn foxglove_validator() -> Result<Command, String> {
-    let script = workspace().join("tests/support/validate_foxglove.mjs");
+    node_env_script("validate_foxglove.mjs", "@foxglove/schemas and ajv")
+}
+
+/// `node tests/support/foxglove_client.mjs target/node-env`: `@foxglove/ws-protocol`'s client
+/// over `ws`, as scripts/node-env.sh installs them; or why it cannot run.
+pub fn foxglove_client() -> Result<Command, String> {
+    node_env_script("foxglove_client.mjs", "@foxglove/ws-protocol and ws")
+}
+
+/// `node tests/support/SCRIPT target/node-env`, once `SCRIPT … --versions` showed that node
+/// loads its `packages` from there.
+fn node_env_script(script: &str, packages: &str) -> Result<Command, String> {
+    let script = workspace().join("tests/support").join(script);
     let env_dir = workspace().join("target/node-env");
-    let validator = || {
+    let command = || {
         let mut node = Command::new("node");
         node.arg(&script).arg(&env_dir);
         node
     };
-    match validator().arg("--versions").output() {
+    match command().arg("--versions").output() {
         Err(e) => Err(format!("no node ({e}); Debian: apt-get install nodejs npm")),
         Ok(out) if !out.status.success() => Err(format!(
-            "node cannot load @foxglove/schemas and ajv from {} ({}); scripts/node-env.sh \
-             installs them",
+            "node cannot load {packages} from {} ({}); scripts/node-env.sh installs them",
             env_dir.display(),
             String::from_utf8_lossy(&out.stderr)
                 .lines()
                 .find(|l| l.contains("Error"))
                 .unwrap_or("")
         )),
-        Ok(_) => Ok(validator()),
+        Ok(_) => Ok(command()),
     }
 }
 
@@ -754,4 +765,15 @@ impl Drop for Replay {
     fn drop(&mut self) {
         stop_and_clean(self.child.take(), &self.namespace);
     }
+}
+
+/// Every message of `topic` in the MCAP file at `path`, in file order, as (log time, bytes).
+pub fn mcap_messages(path: &Path, topic: &str) -> Vec<(u64, Vec<u8>)> {
+    let bytes = std::fs::read(path).expect("read the MCAP file");
+    mcap::MessageStream::new(&bytes)
+        .expect("an MCAP file")
+        .map(|m| m.expect("a complete MCAP file"))
+        .filter(|m| m.channel.topic == topic)
+        .map(|m| (m.log_time, m.data.into_owned()))
+        .collect()
 }

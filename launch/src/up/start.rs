@@ -9,7 +9,7 @@ pub(super) fn start(
     args: &UpArgs,
     plan: Plan,
     recording: Option<RecordPlan>,
-    servers: Vec<ViewPlan>,
+    servers: Vec<ServerPlan>,
 ) -> Result<Stack<'_>, Failure> {
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();

@@ -27,9 +27,13 @@ pub const SWAP_SERVICE: &str = "/mole/swap";
 pub const STOP_SERVICE: &str = "/mole/stop";
 pub const STATUS_SERVICE: &str = "/mole/status";
 
-/// One request to the launcher of `namespace`: the text of its answer, or why not.
-fn call(namespace: &str, request: ControlRequest) -> Result<String, String> {
-    let client = ControlClient::connect(namespace).map_err(|e| e.to_string())?;
+/// The launcher of `namespace`, or why not.
+fn launcher(namespace: &str) -> Result<ControlClient, String> {
+    ControlClient::connect(namespace).map_err(|e| e.to_string())
+}
+
+/// One request to the launcher: the text of its answer, or why not.
+fn call(client: &ControlClient, request: ControlRequest) -> Result<String, String> {
     let response = client
         .call(request, ANSWER_TIMEOUT)
         .map_err(|e| e.to_string())?;
@@ -40,13 +44,13 @@ fn call(namespace: &str, request: ControlRequest) -> Result<String, String> {
     }
 }
 
-/// `mole param WORDS…` against the launcher of `namespace`.
-fn param(namespace: &str, words: &[&str]) -> Result<String, String> {
+/// `mole param WORDS…`.
+fn param(client: &ControlClient, words: &[&str]) -> Result<String, String> {
     let mut request = ControlRequest::new(CONTROL_PARAM);
     if !request.set_argv(words) {
         return Err("the key or value is too long".to_string());
     }
-    call(namespace, request)
+    call(client, request)
 }
 
 /// A setting's text as a Foxglove value: a boolean, a number or else the text.
@@ -110,11 +114,14 @@ impl Settings {
 /// Every setting of the stack in force, of the roles that have any (asked of every role the
 /// first time).
 fn all_settings(namespace: &str, roles: &Mutex<Option<Vec<&'static str>>>) -> Vec<Parameter> {
+    let Ok(client) = launcher(namespace) else {
+        return Vec::new();
+    };
     let known = roles.lock().ok().and_then(|r| r.clone());
     let asked = known.unwrap_or_else(|| GRAPH.iter().map(|s| s.role.name()).collect());
     let (mut settings, mut answered) = (Vec::new(), Vec::new());
     for role in asked {
-        if let Ok(text) = param(namespace, &["list", role]) {
+        if let Ok(text) = param(&client, &["list", role]) {
             settings.extend(listed(role, &text));
             answered.push(role);
         }
@@ -154,6 +161,7 @@ impl ParameterHandler for Settings {
         let (namespace, controls) = (self.namespace.clone(), self.controls);
         let roles = self.roles.clone();
         std::thread::spawn(move || {
+            let client = launcher(&namespace);
             let mut names = Vec::new();
             for p in parameters {
                 let (Some((role, key)), Some(text)) = (
@@ -171,7 +179,11 @@ impl ParameterHandler for Settings {
                         name = p.name,
                         "refused a parameter: served with --no-controls"
                     );
-                } else if let Err(why) = param(&namespace, &["set", role, key, &text]) {
+                } else if let Err(why) = client
+                    .as_ref()
+                    .map_err(Clone::clone)
+                    .and_then(|c| param(c, &["set", role, key, &text]))
+                {
                     tracing::warn!(name = p.name, %why, "the stack refused a parameter");
                 }
                 names.push(p.name);
@@ -219,15 +231,18 @@ pub fn services(namespace: &str) -> Vec<Service> {
             let cwd = std::env::current_dir().map_err(|e| e.to_string())?;
             let request =
                 ControlRequest::swap(&swap.role, &cwd.display().to_string(), &swap.command)?;
-            call(&ns, request).map(answer)
+            call(&launcher(&ns)?, request).map(answer)
         },
     );
     let ns = namespace.to_string();
-    let stop = Service::builder(STOP_SERVICE, schema("mole.Stop", NOTHING))
-        .blocking_handler_fn(move |_| call(&ns, ControlRequest::new(CONTROL_STOP)).map(answer));
+    let stop = Service::builder(STOP_SERVICE, schema("mole.Stop", NOTHING)).blocking_handler_fn(
+        move |_| call(&launcher(&ns)?, ControlRequest::new(CONTROL_STOP)).map(answer),
+    );
     let ns = namespace.to_string();
     let status = Service::builder(STATUS_SERVICE, schema("mole.Status", NOTHING))
-        .blocking_handler_fn(move |_| call(&ns, ControlRequest::new(CONTROL_STATUS)).map(answer));
+        .blocking_handler_fn(move |_| {
+            call(&launcher(&ns)?, ControlRequest::new(CONTROL_STATUS)).map(answer)
+        });
     vec![swap, stop, status]
 }
 

@@ -16,9 +16,9 @@ use mole_recorder::tape::{Window, read_tape};
 use mole_recorder::{Every, Taps, read_until_shutdown};
 use mole_runtime::{BadInput, CommonArgs, Context};
 use mole_types::{graph::nodes, topics};
-use mole_view::Controls;
-use std::net::{IpAddr, Ipv4Addr, SocketAddr};
-use std::path::{Path, PathBuf};
+use mole_view::{Controls, ServerFlags, announce};
+use std::net::SocketAddr;
+use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -28,22 +28,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 struct Args {
     #[command(flatten)]
     common: CommonArgs,
-    /// The port to serve on (0: any free port).
-    #[arg(long, default_value_t = DEFAULT_PORT)]
-    port: u16,
-    /// The address to serve on. Anyone who can reach it sees the run and, unless
-    /// --no-controls, can steer the robot, change its settings and swap its processes.
-    #[arg(long, default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
-    bind: IpAddr,
-    /// Take no goals, paces, setting changes or swaps from clients (they only watch).
-    #[arg(long)]
-    no_controls: bool,
-    /// Serve this recording (`mole up --record FILE`) with playback control; no IPC.
-    #[arg(long, conflicts_with = "no_controls")]
-    file: Option<PathBuf>,
-    /// Once serving, write the server's URL into this file (the launcher waits for it).
-    #[arg(long)]
-    ready_file: Option<PathBuf>,
+    /// Where it serves (default port 8765), whether clients steer (goals, paces, settings,
+    /// swaps), a recording with playback control.
+    #[command(flatten)]
+    serve: ServerFlags,
 }
 
 fn main() -> ExitCode {
@@ -51,18 +39,10 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let address = SocketAddr::new(args.bind, args.port);
-    match &args.file {
-        Some(file) => serve_recording(file, address, args.ready_file.as_deref()),
+    let address = args.serve.address(DEFAULT_PORT);
+    match &args.serve.file {
+        Some(file) => serve_recording(file, address, args.serve.ready_file.as_deref()),
         None => live(args, address),
-    }
-}
-
-/// Writes the URL where the launcher waits for it.
-fn announce(ready_file: Option<&Path>, url: &str) -> std::io::Result<()> {
-    match ready_file {
-        Some(file) => std::fs::write(file, url),
-        None => Ok(()),
     }
 }
 
@@ -70,7 +50,7 @@ fn announce(ready_file: Option<&Path>, url: &str) -> std::io::Result<()> {
 fn live(args: &Args, address: SocketAddr) -> Result<(), Box<dyn std::error::Error>> {
     let mut ctx = Context::new(nodes::FOXGLOVE, &args.common)?;
     ctx.silence_stats();
-    let controls = !args.no_controls;
+    let controls = !args.serve.no_controls;
     let serving = Serving::Live {
         namespace: ctx.namespace().to_string(),
         controls,
@@ -89,7 +69,7 @@ fn live(args: &Args, address: SocketAddr) -> Result<(), Box<dyn std::error::Erro
     let wakers = taps.wakers();
     let _attached = waitset.attach_all(&wakers)?;
     ctx.ready();
-    announce(args.ready_file.as_deref(), &url)?;
+    announce(args.serve.ready_file.as_deref(), &url)?;
     tracing::info!(%url, mode = %ctx.mode(), controls, "serving Foxglove");
 
     let reading = read_until_shutdown(&waitset, &mut ctx, &mut taps, &mut relay)?;

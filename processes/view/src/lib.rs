@@ -11,6 +11,7 @@
 //! with `--file` it feeds it from a recording instead, with no IPC at all ([`recording`]).
 
 pub mod controls;
+pub mod flags;
 pub mod frame_clock;
 pub mod input;
 pub mod playback;
@@ -22,6 +23,7 @@ pub mod taps;
 pub mod tiles;
 
 pub use controls::Controls;
+pub use flags::ServerFlags;
 pub use frame_clock::{FRAME_PERIOD, FRAMES_PER_SECOND, FrameClock};
 pub use input::{
     Access, MAX_INPUT_BYTES, MAX_SPEED, MIN_SPEED, PageInput, Rejected, TimelineOp, admit,

@@ -14,10 +14,9 @@
 
 use clap::Parser;
 use mole_runtime::{CommonArgs, Context, Wake};
-use mole_view::{Access, Controls, DEFAULT_PORT, FrameClock, Scene, Taps};
+use mole_view::{Access, Controls, DEFAULT_PORT, FrameClock, Scene, ServerFlags, Taps};
 use mole_view::{announce, listen, serve, show_recording};
-use std::net::{IpAddr, Ipv4Addr, SocketAddr};
-use std::path::PathBuf;
+use std::net::SocketAddr;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -26,23 +25,9 @@ use std::time::Instant;
 struct Args {
     #[command(flatten)]
     common: CommonArgs,
-    /// The port to serve on (0: any free port).
-    #[arg(long, default_value_t = DEFAULT_PORT)]
-    port: u16,
-    /// The address to serve on. Anyone who can reach it sees the run and, unless
-    /// --no-controls, can steer the robot.
-    #[arg(long, default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
-    bind: IpAddr,
-    /// Refuse goals, pauses and steps from the page (it only watches).
-    #[arg(long)]
-    no_controls: bool,
-    /// Show this recording (`mole up --record FILE`) instead of a running stack, with a
-    /// timeline; no IPC.
-    #[arg(long, conflicts_with = "no_controls")]
-    file: Option<PathBuf>,
-    /// Once serving, write the page's URL into this file (the launcher waits for it).
-    #[arg(long)]
-    ready_file: Option<PathBuf>,
+    /// Where it serves (default port 7777), whether pages steer, a recording with a timeline.
+    #[command(flatten)]
+    serve: ServerFlags,
 }
 
 fn main() -> ExitCode {
@@ -50,9 +35,9 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
-    let address = SocketAddr::new(args.bind, args.port);
-    match &args.file {
-        Some(file) => show_recording(file, address, args.ready_file.as_deref()),
+    let address = args.serve.address(DEFAULT_PORT);
+    match &args.serve.file {
+        Some(file) => show_recording(file, address, args.serve.ready_file.as_deref()),
         None => live(args, address),
     }
 }
@@ -62,7 +47,7 @@ fn live(args: &Args, address: SocketAddr) -> Result<(), Box<dyn std::error::Erro
     let (listener, url) = listen(address)?;
     let mut ctx = Context::new(mole_types::graph::nodes::VIEW, &args.common)?;
     ctx.silence_stats();
-    let (mode, controls) = (ctx.mode(), !args.no_controls);
+    let (mode, controls) = (ctx.mode(), !args.serve.no_controls);
     let mut taps = Taps::open(&ctx)?;
     let mut operator = Controls::open(&ctx)?;
     let served = serve(listener, Access::Live { controls })?;
@@ -70,7 +55,7 @@ fn live(args: &Args, address: SocketAddr) -> Result<(), Box<dyn std::error::Erro
     let wakers = taps.wakers(mode);
     let _attached = waitset.attach_all(&wakers)?;
     ctx.ready();
-    announce(args.ready_file.as_deref(), &url)?;
+    announce(args.serve.ready_file.as_deref(), &url)?;
     tracing::info!(%url, %mode, controls, "serving the view");
 
     let (mut scene, mut frames, started) = (None, 0u64, Instant::now());

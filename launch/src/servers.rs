@@ -28,8 +28,10 @@ pub struct Server {
     pub name: &'static str,
     pub program: &'static str,
     pub default_port: u16,
-    /// What a client of it is (for the warning about an address beyond this machine).
-    pub client: &'static str,
+    /// What it is called in a sentence.
+    pub title: &'static str,
+    /// What a client can do beside watching, unless --no-controls.
+    pub steers: &'static str,
     /// How the run goes on once it gave up restarting it.
     pub without: &'static str,
 }
@@ -39,7 +41,8 @@ pub const VIEW: Server = Server {
     name: nodes::VIEW,
     program: mole_view::VIEW_PROGRAM,
     default_port: mole_view::DEFAULT_PORT,
-    client: "a page",
+    title: "the view",
+    steers: "steer the robot (goals, pause, step; --no-controls turns that off)",
     without: "without the view",
 };
 
@@ -49,7 +52,9 @@ pub const FOXGLOVE: Server = Server {
     name: nodes::FOXGLOVE,
     program: "mole-foxglove",
     default_port: 8765,
-    client: "a Foxglove client",
+    title: "the Foxglove server",
+    steers: "steer the robot, change its settings and swap its processes (--no-controls turns \
+             that off)",
     without: "without the Foxglove server",
 };
 
@@ -139,7 +144,7 @@ fn plan_beside(
     port: Option<Option<u16>>,
     bind: Option<IpAddr>,
     no_controls: bool,
-) -> Result<Option<ViewPlan>, Failure> {
+) -> Result<Option<ServerPlan>, Failure> {
     let Some(port) = port else {
         return Ok(None);
     };
@@ -148,19 +153,19 @@ fn plan_beside(
         bind: bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST)),
         no_controls,
     };
-    ViewPlan::new(server, serve).map(Some)
+    ServerPlan::new(server, serve).map(Some)
 }
 
 impl UpViewArgs {
     /// The view to start beside the stack, if --view asks for one.
-    pub fn plan(&self) -> Result<Option<ViewPlan>, Failure> {
+    pub fn plan(&self) -> Result<Option<ServerPlan>, Failure> {
         plan_beside(VIEW, self.port, self.bind, self.no_controls)
     }
 }
 
 impl UpFoxgloveArgs {
     /// The Foxglove server to start beside the stack, if --foxglove asks for one.
-    pub fn plan(&self) -> Result<Option<ViewPlan>, Failure> {
+    pub fn plan(&self) -> Result<Option<ServerPlan>, Failure> {
         plan_beside(FOXGLOVE, self.port, self.bind, self.no_controls)
     }
 }
@@ -182,7 +187,7 @@ impl ServeArgs {
             Failure::input(format!(
                 "--{}={port}: cannot serve {} on {address}: {e}; expected a free port (0 takes \
                  any)",
-                server.name, server.name
+                server.name, server.title
             ))
         })
     }
@@ -190,16 +195,14 @@ impl ServeArgs {
     /// The server's arguments; warns when it serves beyond this machine.
     fn server_args(&self, server: Server, ready: &Path) -> Vec<String> {
         if !self.bind.is_loopback() {
-            let steer = if self.no_controls {
-                "watch the run"
-            } else {
-                "watch the run and steer the robot (--no-controls turns that off)"
+            let steer = match self.no_controls {
+                true => "watch the run".to_string(),
+                false => format!("watch the run and {}", server.steers),
             };
             tracing::warn!(
-                "{} serves on {}: anyone who can reach it as {} can {steer}",
-                server.name,
-                self.bind,
-                server.client
+                "{} serves on {}: anyone who can reach it can {steer}",
+                server.title,
+                self.bind
             );
         }
         let mut args = vec![
@@ -236,22 +239,22 @@ fn announce(server: Server, ready: &Path) -> bool {
 }
 
 /// What `mole up --view` or `--foxglove` serves with, checked before anything starts.
-pub struct ViewPlan {
+pub struct ServerPlan {
     server: Server,
     program: PathBuf,
     serve: ServeArgs,
 }
 
-impl ViewPlan {
+impl ServerPlan {
     /// The server's name.
     pub fn name(&self) -> &'static str {
         self.server.name
     }
 
     /// The `server` `serve` asks for: its program found and its port free, or exit 2.
-    pub fn new(server: Server, serve: ServeArgs) -> Result<ViewPlan, Failure> {
+    pub fn new(server: Server, serve: ServeArgs) -> Result<ServerPlan, Failure> {
         serve.check_port(server)?;
-        Ok(ViewPlan {
+        Ok(ServerPlan {
             server,
             program: sidecar::program(server.program)?,
             serve,
@@ -261,7 +264,11 @@ impl ViewPlan {
     /// Starts the server with the stack's environment, waits until it serves and prints its
     /// URL. Port 0 is made a free port here, so that a restarted server serves where its
     /// clients look.
-    pub fn start(mut self, env: &[(String, String)], log_path: PathBuf) -> Result<View, Failure> {
+    pub fn start(
+        mut self,
+        env: &[(String, String)],
+        log_path: PathBuf,
+    ) -> Result<SideServer, Failure> {
         let server = self.server;
         if self.serve.port(server) == 0 {
             let port = std::net::TcpListener::bind((self.serve.bind, 0))
@@ -282,7 +289,7 @@ impl ViewPlan {
             &ready,
         )?;
         announce(server, &ready);
-        Ok(View {
+        Ok(SideServer {
             server,
             sidecar,
             ready,
@@ -291,14 +298,14 @@ impl ViewPlan {
 }
 
 /// A server beside a stack that `mole up` runs.
-pub struct View {
+pub struct SideServer {
     server: Server,
     sidecar: Sidecar,
     /// Where it writes its URL once it serves (again after a restart).
     ready: PathBuf,
 }
 
-impl View {
+impl SideServer {
     /// Restarts a server that died, by [`RESTART`]; warns when the run goes on without it.
     pub fn check(&mut self) {
         self.sidecar.check();
