@@ -1,7 +1,8 @@
-//! `mole new planner NAME [DIR]`: a planner in a crate of its own, outside mole's workspace,
-//! that builds on its own and runs in the planning role (`mole up --swap
-//! planning=DIR/NAME/target/release/NAME`). It depends on mole's runtime, message and planning
-//! crates by path (this checkout's, or `--mole`'s).
+//! `mole new planner|estimator NAME [DIR]`: a planner or an estimator in a crate of its own,
+//! outside mole's workspace, that builds on its own and runs in its role (`mole up --swap
+//! planning=DIR/NAME/target/release/NAME`, `--swap localization=…`). It depends on mole's
+//! runtime and message crates (and a planner on the planning crate's `Planner`) by path (this
+//! checkout's, or `--mole`'s).
 
 use crate::Failure;
 use clap::{Args, ValueEnum};
@@ -12,6 +13,41 @@ use std::path::{Path, PathBuf};
 pub enum Kind {
     /// A planner in the planning role: pose, scan, touch, grid and goal in; command and status out.
     Planner,
+    /// An estimator in the localization role: odometry, beacons, fix and touch in; pose out.
+    Estimator,
+}
+
+impl Kind {
+    /// The role its process plays.
+    fn role(self) -> &'static str {
+        match self {
+            Kind::Planner => "planning",
+            Kind::Estimator => "localization",
+        }
+    }
+
+    /// The crate's main, `{name}` to be replaced.
+    fn main(self) -> &'static str {
+        match self {
+            Kind::Planner => PLANNER_MAIN,
+            Kind::Estimator => ESTIMATOR_MAIN,
+        }
+    }
+
+    /// mole's crates it depends on, by their folders.
+    fn depends_on(self) -> &'static [(&'static str, &'static str)] {
+        match self {
+            Kind::Planner => &[
+                ("mole-runtime", "processes/runtime"),
+                ("mole-types", "shared-types"),
+                ("mole-planning", "processes/planning"),
+            ],
+            Kind::Estimator => &[
+                ("mole-runtime", "processes/runtime"),
+                ("mole-types", "shared-types"),
+            ],
+        }
+    }
 }
 
 #[derive(Debug, Clone, Args)]
@@ -68,7 +104,7 @@ pub fn new(args: &NewArgs) -> Result<(), Failure> {
             dir.display()
         )));
     }
-    let files = planner_files(name, &mole);
+    let files = crate_files(args.kind, name, &mole);
     for (path, text) in &files {
         let path = dir.join(path);
         let written = path
@@ -84,18 +120,32 @@ pub fn new(args: &NewArgs) -> Result<(), Failure> {
         let _ = std::fs::copy(&lock, dir.join("Cargo.lock"));
     }
     println!(
-        "{}: a planner crate. Build and run it:\n  cargo build --release --manifest-path {}/Cargo.toml\n  \
-         mole up --swap planning={}/target/release/{name}",
+        "{}: {} crate. Build and run it:\n  cargo build --release --manifest-path {}/Cargo.toml\n  \
+         mole up --swap {}={}/target/release/{name}",
         dir.display(),
+        match args.kind {
+            Kind::Planner => "a planner",
+            Kind::Estimator => "an estimator",
+        },
         dir.display(),
+        args.kind.role(),
         dir.display()
     );
     Ok(())
 }
 
-/// The files of a planner crate named `name` on the mole checkout `mole`.
-pub fn planner_files(name: &str, mole: &Path) -> Vec<(&'static str, String)> {
-    let path = |p: &str| mole.join(p).display().to_string();
+/// The files of a `kind` crate named `name` on the mole checkout `mole`.
+pub fn crate_files(kind: Kind, name: &str, mole: &Path) -> Vec<(&'static str, String)> {
+    let dependencies: String = kind
+        .depends_on()
+        .iter()
+        .map(|(krate, folder)| {
+            format!(
+                "{krate} = {{ path = \"{}\" }}\n",
+                mole.join(folder).display()
+            )
+        })
+        .collect();
     let manifest = format!(
         r#"[package]
 name = "{name}"
@@ -103,21 +153,15 @@ version = "0.1.0"
 edition = "2024"
 
 [dependencies]
-mole-runtime = {{ path = "{runtime}" }}
-mole-types = {{ path = "{types}" }}
-mole-planning = {{ path = "{planning}" }}
-clap = {{ version = "4", features = ["derive", "env"] }}
+{dependencies}clap = {{ version = "4", features = ["derive", "env"] }}
 
 # A crate of its own, not a member of mole's workspace.
 [workspace]
-"#,
-        runtime = path("processes/runtime"),
-        types = path("shared-types"),
-        planning = path("processes/planning"),
+"#
     );
     vec![
         ("Cargo.toml", manifest),
-        ("src/main.rs", PLANNER_MAIN.replace("{name}", name)),
+        ("src/main.rs", kind.main().replace("{name}", name)),
         (".gitignore", "/target\n".to_string()),
     ]
 }
@@ -209,13 +253,93 @@ fn run(mut p: Process) -> Result<(), Box<dyn std::error::Error>> {
 }
 "#;
 
+/// An estimator process: the localization role's ports (mole's graph), dead reckoning from the
+/// start pose with a variance that grows with the distance and the turn driven.
+const ESTIMATOR_MAIN: &str = r#"//! {name}: an estimator in the localization role of a mole stack.
+//!     cargo build --release && mole up --swap localization=target/release/{name}
+
+use clap::Parser;
+use mole_runtime::{CommonArgs, Order, Process, Rule};
+use mole_types::{EstimatorKind, Odom, Role, topics};
+
+#[derive(Debug, Parser)]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+/// Dead reckoning: the unicycle driven by the measured odometry from the start pose; its
+/// variance grows with the distance (m²/m) and the turn (rad²/rad) driven.
+#[derive(Debug)]
+struct DeadReckoning {
+    pose: [f64; 3],
+    variance: [f64; 3],
+}
+
+impl DeadReckoning {
+    const PER_METRE: f64 = 0.01;
+    const PER_RADIAN: f64 = 0.01;
+
+    fn step(&mut self, odom: &Odom) {
+        let [x, y, theta] = &mut self.pose;
+        let (distance, turn) = (odom.v * odom.dt, odom.omega * odom.dt);
+        *x += distance * theta.cos();
+        *y += distance * theta.sin();
+        *theta = (*theta + turn + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+        self.variance[0] += Self::PER_METRE * distance.abs();
+        self.variance[1] += Self::PER_METRE * distance.abs();
+        self.variance[2] += Self::PER_RADIAN * turn.abs();
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let args = Args::parse();
+    mole_runtime::run_role(Role::Localization, &args.common, run)
+}
+
+/// The localization role's ports, as mole's graph has them: odometry triggers a step.
+fn run(mut p: Process) -> Result<(), Box<dyn std::error::Error>> {
+    let odom = p.trigger(topics::SENSING_ODOM, Order::Newest)?;
+    let _beacons = p.input(topics::SENSING_BEACONS, Rule::SameTick)?;
+    let _fix = p.input(topics::SENSING_FIX, Rule::SameTick)?;
+    let _tactile = p.input(topics::SENSING_TACTILE, Rule::SameTick)?;
+    let mut pose_out = p.output(topics::LOCALIZATION_POSE)?;
+    let _particles = p.output(topics::LOCALIZATION_PARTICLES)?;
+    let _landmarks = p.output(topics::LOCALIZATION_LANDMARKS)?;
+    let _trajectory = p.output(topics::LOCALIZATION_TRAJECTORY)?;
+    p.run(
+        |start| {
+            let map = start.map;
+            let pose = [map.start_x, map.start_y, map.start_theta];
+            Ok(DeadReckoning { pose, variance: [0.0; 3] })
+        },
+        |estimate, step| {
+            let measured = step.trigger(odom);
+            estimate.step(measured);
+            let (k, origin) = (step.tick(), step.origin_ns());
+            pose_out.publish(k, origin, |out| {
+                [out.x, out.y, out.theta] = estimate.pose;
+                out.covariance = [0.0; 9];
+                for i in 0..3 {
+                    out.covariance[4 * i] = estimate.variance[i];
+                }
+                out.odom = [measured.x, measured.y, measured.theta];
+                // The graph's estimators are a closed list: it reports itself as a Kalman filter.
+                out.estimator = EstimatorKind::Kf.code();
+            })?;
+            Ok(())
+        },
+    )
+}
+"#;
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn a_planner_crate_depends_on_the_checkout_by_path_and_names_its_program() {
-        let files = planner_files("careful", Path::new("/src/mole"));
+        let files = crate_files(Kind::Planner, "careful", Path::new("/src/mole"));
         let manifest = &files[0].1;
         assert!(manifest.contains("name = \"careful\""));
         assert!(manifest.contains("mole-runtime = { path = \"/src/mole/processes/runtime\" }"));

@@ -8,6 +8,7 @@
 //   --run       publish a malformed message, then {"pace":"run"} on /operator (client publishing)
 //   --until NS  stop once a /truth message at log time >= NS came
 //   --set N=V   set the parameter N to the number V once subscribed
+//   --quiet     keep no messages (only the counts and the pace) and ask nothing: for a long run
 //   --play X    (a recording) play at X times the recorded speed, from --seek NS if given; the
 //               protocol's playback control request, which this client package does not send
 //               itself, written on its socket by hand
@@ -32,6 +33,7 @@ const value = (name, fallback) => {
 const until = BigInt(value("--until", "18446744073709551615"));
 const timeoutS = Number(value("--timeout", "60"));
 const set = value("--set", undefined);
+const quiet = flag("--quiet");
 
 const seen = {
   serverInfo: null,
@@ -43,8 +45,12 @@ const seen = {
   setParameters: null,
   graph: null,
   services: [],
+  // When the truths after step 0 came (ms of this process's clock) and their log times: the
+  // run's pace as a client sees it (scripts/foxglove-cost.sh).
+  paced: null,
   status: null,
   errors: [],
+  counts: {},
 };
 const channels = new Map(); // by subscription id
 const headerTick = new Map();
@@ -101,7 +107,7 @@ client.on("advertise", (advertised) => {
   subscribed = true;
   const caps = seen.serverInfo?.capabilities ?? [];
   if (caps.includes("connectionGraph")) client.subscribeConnectionGraph();
-  if (caps.includes("parameters")) {
+  if (caps.includes("parameters") && !quiet) {
     pending.add("all");
     client.getParameters([], "all");
   }
@@ -135,7 +141,7 @@ client.on("advertise", (advertised) => {
 client.on("advertiseServices", (services) => {
   for (const s of services) {
     seen.services.push(s.name);
-    if (s.name === "/mole/status") {
+    if (s.name === "/mole/status" && !quiet) {
       pending.add("status");
       client.sendServiceCallRequest({ serviceId: s.id, callId: 1, encoding: "json", data: new TextEncoder().encode("{}") });
     }
@@ -161,12 +167,19 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   const channel = channels.get(subscriptionId);
   if (!channel) return;
   const bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+  seen.counts[channel.topic] = (seen.counts[channel.topic] ?? 0) + 1;
   if (channel.encoding === "json") {
     const message = JSON.parse(decoder.decode(bytes));
-    (seen.messages[channel.topic] ??= []).push({ logTime: timestamp, message });
+    if (!quiet) (seen.messages[channel.topic] ??= []).push({ logTime: timestamp, message });
+    if (channel.topic === "/truth" && timestamp > 0n) {
+      const now = performance.now();
+      seen.paced ??= { firstMs: now, firstLogTime: timestamp };
+      Object.assign(seen.paced, { lastMs: now, lastLogTime: timestamp });
+    }
     if (channel.topic === "/truth" && timestamp >= until) setTimeout(finishWhenAnswered, 300);
     return;
   }
+  if (quiet) return;
   const offset = headerTick.get(subscriptionId);
   const tick = data.getBigUint64(offset, true);
   (seen.rawTicks[channel.topic] ??= []).push(tick);
