@@ -1,10 +1,12 @@
-//! `mole new planner|estimator NAME DIR`, as a user runs it: the crate it writes builds on its
-//! own (outside mole's workspace, with mole's lock file) and runs in its role of a lockstep
-//! stack (`mole up --swap planning=…`, `--swap localization=…`), whose recorded outputs are its
-//! own.
+//! `mole new planner|estimator|observer NAME DIR`, as a user runs it: the crate it writes
+//! builds on its own (outside mole's workspace, with mole's lock file) and runs in its role of a
+//! lockstep stack (`mole up --swap planning=…`, `--swap localization=…`), whose recorded outputs
+//! are its own, or beside one (an observer), whose error it measures as the recording has it.
 
+use mole_integration_tests::operator::Operator;
 use mole_integration_tests::*;
-use mole_types::{Cmd, Odom, Pose, WorldMap, topics};
+use mole_types::{ClockMode, Cmd, Odom, PACE_RUN, Pose, Truth, WorldMap, topics};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -152,5 +154,76 @@ fn a_new_estimator_crate_builds_on_its_own_and_estimates_in_the_stack() {
     assert!(
         last.covariance[0] > 0.0,
         "its variance grew with the distance"
+    );
+}
+
+#[test]
+fn a_new_observer_crate_builds_on_its_own_and_measures_the_run_beside_it() {
+    let _serial = serial();
+    let dir = TempDir::new("new-observer");
+    let made = run_mole(&[
+        "new",
+        "observer",
+        "watcher",
+        dir.0.to_str().expect("a path"),
+    ]);
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let program = built(&dir.0.join("watcher"), "watcher");
+
+    let recording = dir.0.join("run.mcap");
+    let record = recording.display().to_string();
+    let args = [
+        "--mode", "lockstep", "--ticks", "300", "--seed", "5", "--paused", "--record", &record,
+    ];
+    let stack = Stack::start("new_observer", &args);
+    let mut operator = Operator::join(&stack, ClockMode::Lockstep);
+    let watcher = Command::new(&program)
+        .args(["--namespace", &stack.namespace])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("start the observer");
+    // The observer subscribes within a second; the run starts then.
+    operator.follow(std::time::Duration::from_secs(1));
+    operator.send_pace(PACE_RUN, 0);
+    operator.follow_until("the run's end", std::time::Duration::from_secs(120), |o| {
+        o.truth.latest().is_some_and(Truth::is_end)
+    });
+    drop(operator);
+    let measured = watcher
+        .wait_with_output()
+        .expect("the observer ends with the run");
+    assert!(measured.status.success(), "the observer failed");
+    stack.succeeded(std::time::Duration::from_secs(120));
+    let said: serde_json::Value =
+        serde_json::from_slice(&measured.stdout).expect("the observer's JSON");
+
+    // The same error, from the recording, over the steps it read.
+    let (first, last) = (
+        said["first_tick"].as_u64().unwrap(),
+        said["last_tick"].as_u64().unwrap(),
+    );
+    let truths: BTreeMap<u64, Truth> = messages::<Truth>(&recording, topics::WORLD_TRUTH.name)
+        .into_iter()
+        .map(|t| (t.header.tick, t))
+        .collect();
+    let (mut sum, mut samples) = (0.0, 0u64);
+    for pose in messages::<Pose>(&recording, topics::LOCALIZATION_POSE.name) {
+        let tick = pose.header.tick;
+        if let Some(t) = truths.get(&tick).filter(|_| (first..=last).contains(&tick)) {
+            sum += (pose.x - t.x).powi(2) + (pose.y - t.y).powi(2);
+            samples += 1;
+        }
+    }
+    assert!(samples >= 250, "{samples} steps read of 300");
+    assert_eq!(said["samples"].as_u64(), Some(samples), "{said}");
+    let rmse = (sum / samples as f64).sqrt();
+    let said_rmse = said["rmse_m"].as_f64().unwrap();
+    assert!(
+        (said_rmse - rmse).abs() <= 1e-9 * rmse.max(1e-9),
+        "{said_rmse} vs {rmse}"
     );
 }

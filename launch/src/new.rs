@@ -1,8 +1,9 @@
-//! `mole new planner|estimator NAME [DIR]`: a planner or an estimator in a crate of its own,
-//! outside mole's workspace, that builds on its own and runs in its role (`mole up --swap
-//! planning=DIR/NAME/target/release/NAME`, `--swap localization=…`). It depends on mole's
-//! runtime and message crates (and a planner on the planning crate's `Planner`) by path (this
-//! checkout's, or `--mole`'s).
+//! `mole new planner|estimator|observer NAME [DIR]`: a planner, an estimator or an observer in a
+//! crate of its own, outside mole's workspace, that builds on its own. A planner or an estimator
+//! runs in its role (`mole up --swap planning=DIR/NAME/target/release/NAME`, `--swap
+//! localization=…`); an observer beside a running stack (`DIR/NAME/target/release/NAME
+//! --namespace NS`). It depends on mole's runtime and message crates (and a planner on the
+//! planning crate's `Planner`) by path (this checkout's, or `--mole`'s).
 
 use crate::Failure;
 use clap::{Args, ValueEnum};
@@ -15,14 +16,26 @@ pub enum Kind {
     Planner,
     /// An estimator in the localization role: odometry, beacons, fix and touch in; pose out.
     Estimator,
+    /// An observer beside a running stack, in no role: truth and pose in, the position error
+    /// out when the run ends.
+    Observer,
 }
 
 impl Kind {
-    /// The role its process plays.
-    fn role(self) -> &'static str {
+    /// How to run it, once built into `program`.
+    fn how_to_run(self, program: &str) -> String {
         match self {
-            Kind::Planner => "planning",
-            Kind::Estimator => "localization",
+            Kind::Planner => format!("mole up --swap planning={program}"),
+            Kind::Estimator => format!("mole up --swap localization={program}"),
+            Kind::Observer => format!("{program} --namespace robot0   (beside `mole up`)"),
+        }
+    }
+
+    fn article(self) -> &'static str {
+        match self {
+            Kind::Planner => "a planner",
+            Kind::Estimator => "an estimator",
+            Kind::Observer => "an observer",
         }
     }
 
@@ -31,6 +44,7 @@ impl Kind {
         match self {
             Kind::Planner => PLANNER_MAIN,
             Kind::Estimator => ESTIMATOR_MAIN,
+            Kind::Observer => OBSERVER_MAIN,
         }
     }
 
@@ -42,7 +56,7 @@ impl Kind {
                 ("mole-types", "shared-types"),
                 ("mole-planning", "processes/planning"),
             ],
-            Kind::Estimator => &[
+            Kind::Estimator | Kind::Observer => &[
                 ("mole-runtime", "processes/runtime"),
                 ("mole-types", "shared-types"),
             ],
@@ -119,17 +133,13 @@ pub fn new(args: &NewArgs) -> Result<(), Failure> {
     if lock.is_file() {
         let _ = std::fs::copy(&lock, dir.join("Cargo.lock"));
     }
+    let program = format!("{}/target/release/{name}", dir.display());
     println!(
-        "{}: {} crate. Build and run it:\n  cargo build --release --manifest-path {}/Cargo.toml\n  \
-         mole up --swap {}={}/target/release/{name}",
+        "{}: {} crate. Build and run it:\n  cargo build --release --manifest-path {}/Cargo.toml\n  {}",
         dir.display(),
-        match args.kind {
-            Kind::Planner => "a planner",
-            Kind::Estimator => "an estimator",
-        },
+        args.kind.article(),
         dir.display(),
-        args.kind.role(),
-        dir.display()
+        args.kind.how_to_run(&program)
     );
     Ok(())
 }
@@ -332,6 +342,88 @@ fn run(mut p: Process) -> Result<(), Box<dyn std::error::Error>> {
     )
 }
 "#;
+
+/// An observer process: beside a stack, in no role; the root mean square of the estimate's
+/// position error over the steps it read, printed as JSON when the run ends.
+const OBSERVER_MAIN: &str = r##"//! {name}: an observer beside a mole stack: it reads the truth and the estimate of every step
+//! and, when the run ends (or at Ctrl-C), prints the estimate's position error as JSON.
+//!     cargo build --release && target/release/{name} --namespace robot0   (beside `mole up`)
+
+use clap::Parser;
+use mole_runtime::{CommonArgs, Context, Wake, stack_clock_mode};
+use mole_types::topics;
+use std::collections::BTreeMap;
+
+#[derive(Debug, Parser)]
+struct Args {
+    /// The namespace of the running stack.
+    #[arg(long, default_value = "robot0")]
+    namespace: String,
+}
+
+/// The root mean square of the position error over the steps whose truth and estimate it read.
+#[derive(Debug, Default)]
+struct PositionError {
+    truths: BTreeMap<u64, (f64, f64)>,
+    estimates: BTreeMap<u64, (f64, f64)>,
+    first_tick: Option<u64>,
+    last_tick: u64,
+    squared_sum: f64,
+    samples: u64,
+}
+
+impl PositionError {
+    /// Scores every step both have come for; forgets them.
+    fn match_steps(&mut self) {
+        let both: Vec<u64> = self.estimates.keys().filter(|k| self.truths.contains_key(k)).copied().collect();
+        for tick in both {
+            let ((x, y), (tx, ty)) = (self.estimates[&tick], self.truths[&tick]);
+            self.squared_sum += (x - tx).powi(2) + (y - ty).powi(2);
+            self.samples += 1;
+            self.first_tick.get_or_insert(tick);
+            self.last_tick = tick;
+            self.estimates.remove(&tick);
+        }
+        // A truth whose estimate never came is not waited for long.
+        let newest = self.truths.keys().next_back().copied().unwrap_or(0);
+        self.truths.retain(|&tick, _| tick + 100 > newest);
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    mole_runtime::exit_code(run(&Args::parse()))
+}
+
+fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
+    let mode = stack_clock_mode(&args.namespace)
+        .ok_or_else(|| format!("no stack runs in the namespace `{}`", args.namespace))?;
+    let mut ctx = Context::new("{name}", &CommonArgs::attach(&args.namespace, mode))?;
+    ctx.silence_stats();
+    // Woken by every truth: in lockstep a queue it left unread would hold the stack up.
+    let mut truths = ctx.subscriber(topics::WORLD_TRUTH)?;
+    let mut estimates = ctx.passive_subscriber(topics::LOCALIZATION_POSE)?;
+    let waitset = ctx.waitset()?;
+    let wakers = [truths.waker()];
+    let _attached = waitset.attach_all(&wakers)?;
+    ctx.ready();
+    let (mut error, mut ended) = (PositionError::default(), false);
+    while !ended {
+        let wake = waitset.wait(&mut ctx, None)?;
+        truths.drain(|t| {
+            error.truths.insert(t.header.tick, (t.x, t.y));
+            ended |= t.is_end();
+        });
+        estimates.drain(|p| _ = error.estimates.insert(p.header.tick, (p.x, p.y)));
+        error.match_steps();
+        ended |= wake == Wake::Shutdown;
+    }
+    let rmse = (error.squared_sum / error.samples.max(1) as f64).sqrt();
+    let first = error.first_tick.unwrap_or(0);
+    let (samples, last) = (error.samples, error.last_tick);
+    println!(r#"{{"samples":{samples},"first_tick":{first},"last_tick":{last},"rmse_m":{rmse}}}"#);
+    Ok(())
+}
+"##;
 
 #[cfg(test)]
 mod tests {
