@@ -289,3 +289,30 @@ fn served_recording_plays_as_exported(recording: &Path, export: &Path) {
         assert!(same(&m["message"], &expected), "/truth at {time} ns");
     }
 }
+
+/// What `mole foxglove` cannot serve is refused with exit 2 and a line naming it, before
+/// anything serves: a file that is not a recording, a port something else holds, controls to
+/// turn off on a recording.
+#[test]
+fn what_cannot_be_served_is_refused_before_serving() {
+    let dir = TempDir::new("foxglove-refused");
+    let text = dir.0.join("notes.mcap");
+    std::fs::write(&text, "not a recording").expect("write");
+    let refused = run_mole(&["foxglove", &text.display().to_string(), "--port", "0"]);
+    assert_eq!(refused.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(stderr.contains("notes.mcap: not an MCAP file"), "{stderr}");
+
+    let held = std::net::TcpListener::bind("127.0.0.1:0").expect("a port");
+    let port = held.local_addr().expect("its address").port().to_string();
+    let in_use = run_mole(&["foxglove", &text.display().to_string(), "--port", &port]);
+    assert_eq!(in_use.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&in_use.stderr);
+    assert!(
+        stderr.contains(&format!("--port={port}: cannot serve the Foxglove server")),
+        "{stderr}"
+    );
+
+    let controls = run_mole(&["foxglove", &text.display().to_string(), "--no-controls"]);
+    assert_eq!(controls.status.code(), Some(2));
+}

@@ -176,8 +176,8 @@ impl ServeArgs {
     }
 
     /// Refuses, before anything starts, a port that something else serves on already (0, any
-    /// free port, always works).
-    fn check_port(&self, server: Server) -> Result<(), Failure> {
+    /// free port, always works). `flag` is the option that named it.
+    fn check_port(&self, server: Server, flag: &str) -> Result<(), Failure> {
         let port = self.port(server);
         if port == 0 {
             return Ok(());
@@ -185,9 +185,9 @@ impl ServeArgs {
         let address = SocketAddr::new(self.bind, port);
         std::net::TcpListener::bind(address).map(drop).map_err(|e| {
             Failure::input(format!(
-                "--{}={port}: cannot serve {} on {address}: {e}; expected a free port (0 takes \
+                "{flag}={port}: cannot serve {} on {address}: {e}; expected a free port (0 takes \
                  any)",
-                server.name, server.title
+                server.title
             ))
         })
     }
@@ -253,7 +253,7 @@ impl ServerPlan {
 
     /// The `server` `serve` asks for: its program found and its port free, or exit 2.
     pub fn new(server: Server, serve: ServeArgs) -> Result<ServerPlan, Failure> {
-        serve.check_port(server)?;
+        serve.check_port(server, &format!("--{}", server.name))?;
         Ok(ServerPlan {
             server,
             program: sidecar::program(server.program)?,
@@ -323,6 +323,7 @@ impl SideServer {
 /// `mole view --namespace NS` (`mole foxglove …`): serves the running stack in NS until Ctrl-C
 /// or the stack ends; `mole view FILE`: a recording, until Ctrl-C.
 pub fn view(server: Server, args: &ViewArgs) -> Result<(), Failure> {
+    args.serve.check_port(server, "--port")?;
     sidecar::build_process_binaries(&[server.program])?;
     if let Some(file) = &args.file {
         return view_recording(server, file, &args.serve);

@@ -91,6 +91,8 @@ fn serve_recording(
     address: SocketAddr,
     ready_file: Option<&Path>,
 ) -> Result<(), Box<dyn std::error::Error>> {
+    // No Context here (no IPC): the log is set up as a process's would be.
+    mole_runtime::init_tracing(nodes::FOXGLOVE);
     let names: Vec<&str> = topics::all().into_iter().map(|(name, _)| name).collect();
     let tape = read_tape(file, &names, Window::ALL).map_err(|e| BadInput(e.to_string()))?;
     let mut replay = Replay::new(tape).ok_or_else(|| {
