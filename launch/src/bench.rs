@@ -2,6 +2,7 @@
 
 use crate::Failure;
 use crate::bench_ipc::{BenchIpcArgs, bench_ipc};
+use crate::bench_peers::{BenchPeersArgs, bench_peers};
 use crate::bench_stack::{BenchStackArgs, bench_stack};
 use clap::Subcommand;
 
@@ -13,6 +14,9 @@ pub enum BenchCommand {
     Ipc(BenchIpcArgs),
     /// Run the full stack and report steps/s, loop latency, per-hop latency, CPU and memory.
     Stack(Box<BenchStackArgs>),
+    /// The same four-process loop (a source, two stages, a sink back to the source) on raw
+    /// iceoryx2, mole's runtime and dora-rs: loop latency, loops/s flat out, CPU per loop.
+    Peers(BenchPeersArgs),
 }
 
 /// Runs the benchmark `command` names and prints its report.
@@ -20,5 +24,6 @@ pub fn bench(command: &BenchCommand) -> Result<(), Failure> {
     match command {
         BenchCommand::Ipc(args) => bench_ipc(args).map(drop),
         BenchCommand::Stack(args) => bench_stack(args).map(drop),
+        BenchCommand::Peers(args) => bench_peers(args).map(drop),
     }
 }

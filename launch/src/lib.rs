@@ -8,6 +8,7 @@
 
 pub mod bench;
 pub mod bench_ipc;
+pub mod bench_peers;
 pub mod bench_stack;
 pub mod control;
 pub mod doctor;

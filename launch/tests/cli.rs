@@ -35,7 +35,10 @@ fn help_lists_every_subcommand() {
             "foxglove", "info", "export", "eval", "g2o", "bench", "doctor", "new", "help"
         ]
     );
-    assert_eq!(listed_subcommands(&["bench"]), ["ipc", "stack", "help"]);
+    assert_eq!(
+        listed_subcommands(&["bench"]),
+        ["ipc", "stack", "peers", "help"]
+    );
     assert_eq!(
         listed_subcommands(&["param"]),
         ["list", "get", "set", "help"]
@@ -64,6 +67,7 @@ fn help_lists_every_subcommand() {
         &["g2o"],
         &["bench", "ipc"],
         &["bench", "stack"],
+        &["bench", "peers"],
     ] {
         let output = Command::new(BIN)
             .args(command)
@@ -101,8 +105,10 @@ fn bad_arguments_exit_2() {
 
 #[test]
 fn bench_and_top_refuse_bad_input_with_exit_2() {
-    let cases: [&[&str]; 4] = [
+    let cases: [&[&str]; 6] = [
         &["bench", "ipc", "--sizes", "64,999"],
+        &["bench", "peers", "--sizes", "64,100"],
+        &["bench", "peers", "--rate-hz", "0"],
         &[
             "bench",
             "ipc",

@@ -3,7 +3,7 @@
 use crate::floor::{Pinning, PipePair, Placement};
 use crate::link::{self, Link, STOP, StreamLink};
 use crate::messages::with_message_type;
-use crate::probe::{CHAIN_HOPS, driver_ports};
+use crate::probe::{CHAIN_HOPS, LOOP_STAGES, driver_ports};
 use crate::roles;
 use crate::{
     BenchError, ChainPoint, FanoutPoint, FloorPoint, IpcBenchConfig, IpcReport, LatencyPoint,
@@ -227,7 +227,7 @@ fn summarize(samples: &mut [u64]) -> Result<Summary, BenchError> {
     Summary::from_ns(samples).ok_or_else(|| BenchError::Internal("no samples".to_string()))
 }
 
-struct Driver<'c> {
+pub(crate) struct Driver<'c> {
     config: &'c IpcBenchConfig,
     probe: PathBuf,
     groups: Cell<usize>,
@@ -470,6 +470,37 @@ impl Driver<'_> {
         })
     }
 
+    /// `mole bench peers`' loop on `transport`: the driver is the source, [`LOOP_STAGES`] probes
+    /// forward (the last closes the loop). After `warm` loops, `measure` is called around the
+    /// measured ones (it reads the CPU clocks), which it gets as origin → back latencies.
+    pub(crate) fn peer_loop<T>(
+        &self,
+        transport: Transport,
+        size: usize,
+        (warm, loops): (usize, usize),
+        period: Option<Duration>,
+        measure: impl FnOnce(&mut dyn FnMut() -> Result<Vec<u64>, BenchError>) -> Result<T, BenchError>,
+    ) -> Result<T, BenchError> {
+        let timeout = self.timeout + period.unwrap_or_default();
+        let kind = ProbeKind::Loop;
+        self.group(
+            transport,
+            kind,
+            size,
+            WakeMode::Event,
+            LOOP_STAGES,
+            |link| {
+                roles::chain_handshake(link, Instant::now() + STARTUP)?;
+                roles::drive_chain(link, 0, warm, 0, period, timeout)?;
+                let first = warm as u64;
+                let result =
+                    measure(&mut || roles::drive_chain(link, first, 0, loops, period, timeout))?;
+                link.send(STOP, None, false)?;
+                Ok(result)
+            },
+        )
+    }
+
     fn run(&self) -> Result<IpcReport, BenchError> {
         let c = self.config;
         let mut report = IpcReport {
@@ -528,6 +559,14 @@ impl Driver<'_> {
 /// and dead nodes are cleaned, whatever the outcome.
 pub fn run_ipc_bench(config: &IpcBenchConfig) -> Result<IpcReport, BenchError> {
     config.validate()?;
+    with_driver(config, |driver| driver.run())
+}
+
+/// Runs `f` on a driver for `config`'s probes, then cleans dead nodes whatever the outcome.
+pub(crate) fn with_driver<T>(
+    config: &IpcBenchConfig,
+    f: impl FnOnce(&Driver<'_>) -> Result<T, BenchError>,
+) -> Result<T, BenchError> {
     let probe = find_probe(config)?;
     let driver = Driver {
         config,
@@ -535,7 +574,7 @@ pub fn run_ipc_bench(config: &IpcBenchConfig) -> Result<IpcReport, BenchError> {
         groups: Cell::new(0),
         timeout: Duration::from_millis(config.timeout_ms),
     };
-    let result = driver.run();
+    let result = f(&driver);
     mole_runtime::cleanup_dead_nodes();
     result
 }

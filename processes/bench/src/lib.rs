@@ -24,6 +24,7 @@ mod floor;
 mod link;
 pub mod messages;
 pub mod observer;
+pub mod peers;
 mod probe;
 mod report;
 mod roles;
@@ -45,7 +46,7 @@ pub const PROBE_BINARY: &str = "mole-bench-probe";
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
     #[error(
-        "unsupported payload size {0} B: the sizes are 64, 1024, 16384, 262144, 1048576 and 4194304"
+        "unsupported payload size {0} B: the sizes are 64, 1024, 4096, 16384, 262144, 1048576 and 4194304"
     )]
     UnsupportedSize(usize),
     #[error("invalid benchmark configuration: {0}")]
@@ -141,6 +142,9 @@ pub enum ProbeKind {
     Throughput,
     /// Republish every message on the next topic of the chain.
     Chain,
+    /// Republish every message on the next topic of `mole bench peers`' loop (the last stage
+    /// closes it back to the driver).
+    Loop,
 }
 
 /// What `mole bench ipc` measures. [`IpcBenchConfig::default`] is the full run,
@@ -186,7 +190,7 @@ impl Default for IpcBenchConfig {
     fn default() -> Self {
         IpcBenchConfig {
             namespace: format!("bench{}", std::process::id()),
-            sizes: messages::SUPPORTED_SIZES.to_vec(),
+            sizes: messages::IPC_SIZES.to_vec(),
             samples: 2000,
             samples_large: 300,
             throughput_secs: 1.0,

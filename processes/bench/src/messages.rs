@@ -9,8 +9,12 @@ use mole_types::{Header, Invalid, Message};
 /// Bytes of the common header at the start of every message.
 pub const HEADER_BYTES: usize = core::mem::size_of::<Header>();
 
+/// The sizes `mole bench ipc` measures by default (4 KiB is `mole bench peers`').
+pub const IPC_SIZES: &[usize] = &[64, 1024, 16 * 1024, 256 * 1024, 1024 * 1024, 4 << 20];
+
 /// Every payload size (whole message, header included) the benchmark has a type for.
-pub const SUPPORTED_SIZES: &[usize] = &[64, 1024, 16 * 1024, 256 * 1024, 1024 * 1024, 4 << 20];
+pub const SUPPORTED_SIZES: &[usize] =
+    &[64, 1024, 4096, 16 * 1024, 256 * 1024, 1024 * 1024, 4 << 20];
 
 /// A payload message: the header, then `SIZE − 32` bytes the sender writes in place.
 pub trait BenchMessage: Message {
@@ -55,6 +59,7 @@ macro_rules! bench_message {
 
 bench_message!(Bench64, 64, "mole.Bench64.v1");
 bench_message!(Bench1K, 1024, "mole.Bench1K.v1");
+bench_message!(Bench4K, 4096, "mole.Bench4K.v1");
 bench_message!(Bench16K, 16384, "mole.Bench16K.v1");
 bench_message!(Bench256K, 262144, "mole.Bench256K.v1");
 bench_message!(Bench1M, 1048576, "mole.Bench1M.v1");
@@ -71,6 +76,10 @@ macro_rules! with_message_type {
             }
             1024 => {
                 type $M = $crate::messages::Bench1K;
+                $body
+            }
+            4096 => {
+                type $M = $crate::messages::Bench4K;
                 $body
             }
             16384 => {

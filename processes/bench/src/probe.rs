@@ -49,12 +49,31 @@ const CHAIN_NAMES: [&str; CHAIN_HOPS + 1] = [
     "bench/chain/5",
 ];
 
-fn chain(i: usize) -> PortSpec {
+/// Forwarding processes of `mole bench peers`' loop: two stages and the sink that closes it.
+pub(crate) const LOOP_STAGES: usize = 3;
+const LOOP_NAMES: [&str; LOOP_STAGES + 1] = [
+    "bench/loop/0",
+    "bench/loop/1",
+    "bench/loop/2",
+    "bench/loop/3",
+];
+
+/// Topic `i` of a chain of hops named `names` (one more topic than hops).
+fn hop_topic(names: &'static [&'static str], i: usize) -> PortSpec {
     PortSpec {
-        name: CHAIN_NAMES[i.min(CHAIN_HOPS)],
+        name: names[i.min(names.len() - 1)],
         buffer: 2,
         max_publishers: 1,
         max_subscribers: 1,
+    }
+}
+
+/// The topics of a chain-like kind (the chain or the loop), and its number of hops.
+fn hops_of(kind: ProbeKind) -> Option<(&'static [&'static str], usize)> {
+    match kind {
+        ProbeKind::Chain => Some((&CHAIN_NAMES, CHAIN_HOPS)),
+        ProbeKind::Loop => Some((&LOOP_NAMES, LOOP_STAGES)),
+        _ => None,
     }
 }
 
@@ -64,7 +83,10 @@ pub(crate) fn driver_ports(kind: ProbeKind) -> Ports {
         ProbeKind::Latency => (PING, None, Some(ACK)),
         ProbeKind::Fanout => (FANOUT, None, Some(ACK)),
         ProbeKind::Throughput => (FLOOD, None, Some(ACK)),
-        ProbeKind::Chain => (chain(0), Some(chain(CHAIN_HOPS)), None),
+        ProbeKind::Chain | ProbeKind::Loop => {
+            let (names, hops) = hops_of(kind).unwrap_or((&CHAIN_NAMES, CHAIN_HOPS));
+            (hop_topic(names, 0), Some(hop_topic(names, hops)), None)
+        }
     };
     Ports {
         data_out: Some(data_out),
@@ -85,15 +107,16 @@ pub(crate) fn probe_ports(kind: ProbeKind, id: usize) -> Result<Ports, BenchErro
         ProbeKind::Latency => echo(PING),
         ProbeKind::Fanout => echo(FANOUT),
         ProbeKind::Throughput => echo(FLOOD),
-        ProbeKind::Chain => {
-            if id >= CHAIN_HOPS {
+        ProbeKind::Chain | ProbeKind::Loop => {
+            let (names, hops) = hops_of(kind).unwrap_or((&CHAIN_NAMES, CHAIN_HOPS));
+            if id >= hops {
                 return Err(BenchError::Config(format!(
-                    "chain hop {id} does not exist (0..{CHAIN_HOPS})"
+                    "hop {id} does not exist (0..{hops})"
                 )));
             }
             Ports {
-                data_in: Some(chain(id)),
-                data_out: Some(chain(id + 1)),
+                data_in: Some(hop_topic(names, id)),
+                data_out: Some(hop_topic(names, id + 1)),
                 ..Ports::default()
             }
         }
@@ -189,7 +212,7 @@ pub fn run_probe(args: &ProbeArgs) -> Result<(), BenchError> {
     let role = move |link: &mut dyn Link| match kind {
         ProbeKind::Latency | ProbeKind::Fanout => roles::echo(link, id, false, idle),
         ProbeKind::Throughput => roles::echo(link, id, true, idle),
-        ProbeKind::Chain => roles::hop(link, idle),
+        ProbeKind::Chain | ProbeKind::Loop => roles::hop(link, idle),
     };
     let ports = probe_ports(kind, id as usize)?;
     let role_name = format!("probe{id}");
@@ -270,6 +293,12 @@ mod tests {
         assert_eq!(d.data_out.map(|s| s.name), first.data_in.map(|s| s.name));
         assert_eq!(d.data_in.map(|s| s.name), last.data_out.map(|s| s.name));
         assert!(probe_ports(ProbeKind::Chain, CHAIN_HOPS).is_err());
+        let d = driver_ports(ProbeKind::Loop);
+        let first = probe_ports(ProbeKind::Loop, 0).expect("first stage");
+        let sink = probe_ports(ProbeKind::Loop, LOOP_STAGES - 1).expect("sink");
+        assert_eq!(d.data_out.map(|s| s.name), first.data_in.map(|s| s.name));
+        assert_eq!(d.data_in.map(|s| s.name), sink.data_out.map(|s| s.name));
+        assert!(probe_ports(ProbeKind::Loop, LOOP_STAGES).is_err());
     }
 
     #[test]
