@@ -391,3 +391,64 @@ fn a_process_that_refuses_its_input_fails_the_run_with_exit_2_without_restarts()
         "bad input is not retried:\n{logs}"
     );
 }
+
+/// `mole bench stack` splits each process's CPU per step: its own step function, the runtime
+/// around it, and the kernel's share; the first two add up to the process's CPU.
+#[test]
+fn bench_stack_splits_each_process_cpu_per_step() {
+    let _serial = serial();
+    let namespace = unique_namespace("benchsplit");
+    let out = std::env::temp_dir().join(format!("mole-{namespace}"));
+    let json = out.with_extension("json");
+    let output = std::process::Command::new(bin_dir().join("mole"))
+        .current_dir(workspace())
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .args(["bench", "stack", "--mode", "lockstep", "--ticks", "2000"])
+        .args(["--namespace", &namespace, "--quiet", "--out"])
+        .arg(&out)
+        .arg("--json")
+        .arg(&json)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("run mole bench stack");
+    let text = std::fs::read_to_string(&json);
+    let _ = (std::fs::remove_dir_all(&out), std::fs::remove_file(&json));
+    assert!(
+        output.status.success(),
+        "mole bench stack failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(processes_of(&namespace).is_empty(), "processes left behind");
+    let report: serde_json::Value = serde_json::from_str(&text.expect("the JSON")).expect("JSON");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("around µs"), "{stdout}");
+    let processes = report["processes"].as_array().expect("processes");
+    let roles: Vec<&str> = processes
+        .iter()
+        .filter_map(|p| p["role"].as_str())
+        .collect();
+    for role in Role::ALL {
+        assert!(
+            roles.contains(&role.name()),
+            "{role:?} missing from {roles:?}"
+        );
+    }
+    for p in processes {
+        let cost = &p["per_step"];
+        let us = |field: &str| {
+            cost[field]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{field}: {p}"))
+        };
+        let (step, around, kernel) = (us("step_us"), us("runtime_us"), us("kernel_us"));
+        assert!(step > 0.0 && around > 0.0 && kernel >= 0.0, "{p}");
+        assert!(kernel <= step + around, "{p}");
+        let steps = p["steps"].as_f64().expect("steps");
+        let cpu_us = p["cpu_s"].as_f64().expect("cpu_s") * 1e6;
+        assert!(
+            ((step + around) * steps - cpu_us).abs() <= 1e-6 * cpu_us + 1.0,
+            "{p}"
+        );
+    }
+}

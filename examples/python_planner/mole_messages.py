@@ -582,7 +582,7 @@ _check(TopicStats, 80, 8, [0, 32, 36, 40, 48, 56, 64, 68, 72, 76])
 
 
 class Stats(ctypes.Structure):
-    """`mole.Stats.v1`: 1376 bytes, alignment 8."""
+    """`mole.Stats.v2`: 1392 bytes, alignment 8."""
 
     _fields_ = [
         ("header", Header),
@@ -592,15 +592,17 @@ class Stats(ctypes.Structure):
         ("cpu_ns", ctypes.c_uint64),
         ("max_rss_bytes", ctypes.c_uint64),
         ("steps", ctypes.c_uint64),
+        ("step_cpu_ns", ctypes.c_uint64),
+        ("system_ns", ctypes.c_uint64),
         ("topics", TopicStats * 16),
     ]
 
     @classmethod
     def type_name(cls) -> str:
-        return "mole.Stats.v1"
+        return "mole.Stats.v2"
 
 
-_check(Stats, 1376, 8, [0, 32, 64, 68, 72, 80, 88, 96])
+_check(Stats, 1392, 8, [0, 32, 64, 68, 72, 80, 88, 96, 104, 112])
 
 
 class RunStatus(ctypes.Structure):

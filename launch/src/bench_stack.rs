@@ -747,16 +747,29 @@ fn render(r: &StackReport) -> String {
     }
     let _ = writeln!(
         s,
-        "\n{:<14} {:>9} {:>9} {:>10} {:>9}",
-        "process", "cpu s", "cpu %", "peak MiB", "steps"
+        "\n{:<14} {:>9} {:>9} {:>10} {:>9} {:>10} {:>10} {:>10}",
+        "process", "cpu s", "cpu %", "peak MiB", "steps", "step µs", "around µs", "kernel µs"
     );
     for p in &r.processes {
+        let c = p.per_step;
         let _ = writeln!(
             s,
-            "{:<14} {:>9.2} {:>9.1} {:>10.1} {:>9}",
-            p.role, p.cpu_s, p.cpu_percent, p.peak_rss_mib, p.steps
+            "{:<14} {:>9.2} {:>9.1} {:>10.1} {:>9} {:>10.1} {:>10.1} {:>10.1}",
+            p.role,
+            p.cpu_s,
+            p.cpu_percent,
+            p.peak_rss_mib,
+            p.steps,
+            c.step_us,
+            c.runtime_us,
+            c.kernel_us
         );
     }
+    let _ = writeln!(
+        s,
+        "(per step: in the process's step function, in the runtime around it, and the kernel's \
+         share of both)"
+    );
     s
 }
 

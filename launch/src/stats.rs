@@ -18,6 +18,21 @@ pub struct ProcessUsage {
     pub peak_rss_mib: f64,
     /// Steps the process handled.
     pub steps: u64,
+    /// Per step, averaged over the run (µs): CPU in the process's own step function (its
+    /// algorithm and publishes), in the runtime around it (waiting, receiving, checking,
+    /// statistics), and the kernel's share of both (system time).
+    pub per_step: StepCost,
+}
+
+/// Where one process's CPU goes per step (µs), from its `stack/stats`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct StepCost {
+    /// In the step function (`Context::timed_step`).
+    pub step_us: f64,
+    /// Around it: the process's CPU less its step function's.
+    pub runtime_us: f64,
+    /// System time, part of the two above.
+    pub kernel_us: f64,
 }
 
 /// Latency from `origin_ns` to receipt at one subscriber, over the run.
@@ -45,6 +60,11 @@ struct RoleState {
     cpu_before_ns: u64,
     cpu_first_ns: Option<u64>,
     cpu_last_ns: u64,
+    /// Step-function and system CPU: earlier incarnations' and this one's, ns.
+    step_before_ns: u64,
+    step_last_ns: u64,
+    system_before_ns: u64,
+    system_last_ns: u64,
     first_seen: Option<Instant>,
     last_seen: Option<Instant>,
     max_rss_bytes: u64,
@@ -59,6 +79,22 @@ struct TopicState {
     max: f64,
     dropped: u64,
     invalid: u64,
+}
+
+impl RoleState {
+    /// CPU per step over the run, given the run's total CPU (`cpu_ns`).
+    fn per_step(&self, cpu_ns: u64) -> StepCost {
+        if self.steps == 0 {
+            return StepCost::default();
+        }
+        let step_ns = self.step_before_ns + self.step_last_ns;
+        let per = |ns: u64| ns as f64 / 1e3 / self.steps as f64;
+        StepCost {
+            step_us: per(step_ns),
+            runtime_us: per(cpu_ns.saturating_sub(step_ns)),
+            kernel_us: per(self.system_before_ns + self.system_last_ns),
+        }
+    }
 }
 
 /// Accumulates `stack/stats` messages.
@@ -77,7 +113,9 @@ impl StatsCollector {
         if state.pid != stats.pid {
             // A new incarnation: keep what the old one used.
             state.cpu_before_ns += state.cpu_last_ns;
-            state.cpu_last_ns = 0;
+            state.step_before_ns += state.step_last_ns;
+            state.system_before_ns += state.system_last_ns;
+            (state.cpu_last_ns, state.step_last_ns, state.system_last_ns) = (0, 0, 0);
             state.pid = stats.pid;
         }
         if state.cpu_first_ns.is_none() {
@@ -85,6 +123,8 @@ impl StatsCollector {
             state.first_seen = Some(now);
         }
         state.cpu_last_ns = stats.cpu_ns;
+        state.step_last_ns = stats.step_cpu_ns;
+        state.system_last_ns = stats.system_ns;
         state.last_seen = Some(now);
         state.max_rss_bytes = state.max_rss_bytes.max(stats.max_rss_bytes);
         state.steps = state.steps.max(stats.steps);
@@ -129,6 +169,7 @@ impl StatsCollector {
                     },
                     peak_rss_mib: s.max_rss_bytes as f64 / (1024.0 * 1024.0),
                     steps: s.steps,
+                    per_step: s.per_step(cpu_ns),
                 }
             })
             .collect()
@@ -175,6 +216,24 @@ mod tests {
         s.topics[0].latency_p99_us = p50 * 2.0;
         s.topics[0].latency_max_us = p50 * 3.0;
         s
+    }
+
+    #[test]
+    fn the_cost_per_step_splits_the_cpu_summed_over_restarts() {
+        let mut c = StatsCollector::default();
+        let report = |pid, cpu_ns, step_cpu_ns, system_ns, steps| {
+            let mut s = stats("mapping", pid, cpu_ns, 10.0);
+            (s.step_cpu_ns, s.system_ns, s.steps) = (step_cpu_ns, system_ns, steps);
+            s
+        };
+        c.record(&report(10, 4_000_000, 1_000_000, 2_000_000, 100));
+        // A restart: the new incarnation counts from zero, and has handled 200 steps in all.
+        c.record(&report(11, 2_000_000, 1_000_000, 500_000, 200));
+        let cost = c.processes()[0].per_step;
+        // 6 ms of CPU over 200 steps: 10 µs in the step, 20 µs around it, 12.5 µs in the kernel.
+        assert!((cost.step_us - 10.0).abs() < 1e-9, "{cost:?}");
+        assert!((cost.runtime_us - 20.0).abs() < 1e-9, "{cost:?}");
+        assert!((cost.kernel_us - 12.5).abs() < 1e-9, "{cost:?}");
     }
 
     #[test]

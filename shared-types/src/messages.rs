@@ -1033,8 +1033,8 @@ pub struct TopicStats {
 /// `stack/stats`: one process's statistics, once a second.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
-#[type_name("mole.Stats.v1")]
-#[layout(size = 96 + 80 * MAX_TOPIC_STATS)]
+#[type_name("mole.Stats.v2")]
+#[layout(size = 112 + 80 * MAX_TOPIC_STATS)]
 #[message(check = Stats::check)]
 pub struct Stats {
     pub header: Header,
@@ -1048,6 +1048,11 @@ pub struct Stats {
     pub max_rss_bytes: u64,
     /// Steps the process has handled.
     pub steps: u64,
+    /// CPU time (user + system) of this process's own step function so far: its algorithm and
+    /// the publishes it makes (ns); `cpu_ns` less this is the runtime around the steps.
+    pub step_cpu_ns: u64,
+    /// System (kernel) CPU time of the process so far, part of `cpu_ns` (ns).
+    pub system_ns: u64,
     pub topics: [TopicStats; MAX_TOPIC_STATS],
 }
 

@@ -14,7 +14,7 @@ pub(super) fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failur
         servers,
         faults,
         tuner,
-        watch,
+        mut watch,
         progress,
         started,
         ..
@@ -34,6 +34,9 @@ pub(super) fn finish(stack: Stack<'_>, end: RunEnd) -> Result<RunOutcome, Failur
     if !killed.is_empty() {
         tracing::warn!(?killed, "needed SIGKILL");
     }
+    // Each process's last statistics, published as it ended: every step and all its CPU.
+    let mut ports = ports;
+    ports.stats.drain(|s| watch.record(s));
     // After every role: the recorder reads their last samples before it finishes its file.
     if let Some(recorder) = recorder {
         recorder.stop(timeout);

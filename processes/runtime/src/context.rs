@@ -110,6 +110,8 @@ pub struct Context {
     stats_publisher: Option<Publisher<Stats>>,
     last_stats: Instant,
     steps: u64,
+    /// CPU time spent in step functions (`Context::timed_step`), ns.
+    step_cpu_ns: u64,
     takeover: bool,
     resume: Option<std::path::PathBuf>,
     /// This process's publishers (those still alive), for [`Context::offer_history`].
@@ -182,6 +184,7 @@ impl Context {
             stats_publisher: None,
             last_stats: Instant::now(),
             steps: 0,
+            step_cpu_ns: 0,
             takeover: args.takeover,
             resume: args.resume.clone(),
             history_offers: Default::default(),
@@ -250,6 +253,21 @@ impl Context {
     pub fn request_shutdown(&self) {
         self.shutdown.store(true, Ordering::SeqCst);
     }
+    /// Runs one step's work, `f`, and adds the CPU time this thread spent in it to the
+    /// statistics' `step_cpu_ns` (the step function, apart from the runtime around it).
+    pub fn timed_step<T>(&mut self, f: impl FnOnce() -> T) -> T {
+        let start = thread_cpu_ns();
+        let out = f();
+        self.add_step_cpu(start);
+        out
+    }
+
+    /// Adds the CPU time this thread spent since `start` (a [`thread_cpu_ns`] reading) to the
+    /// statistics' `step_cpu_ns`, for a step whose work borrows the process.
+    pub(crate) fn add_step_cpu(&mut self, start: u64) {
+        self.step_cpu_ns += thread_cpu_ns().saturating_sub(start);
+    }
+
     /// Counts a handled step (reported in the statistics). The first one is announced at once,
     /// so a launcher swapping this process in knows when it has taken over.
     pub fn count_step(&mut self) {
@@ -634,8 +652,8 @@ impl Context {
     fn publish_stats(&mut self) {
         let window_s = self.last_stats.elapsed().as_secs_f64();
         self.last_stats = Instant::now();
-        let (cpu_ns, max_rss_bytes) = resource_usage();
-        let steps = self.steps;
+        let (cpu_ns, system_ns, max_rss_bytes) = resource_usage();
+        let (steps, step_cpu_ns) = (self.steps, self.step_cpu_ns);
         let (role, registry) = (&self.role, &self.stats);
         if let Some(publisher) = self.stats_publisher.as_mut() {
             let result = publisher.publish(steps, 0, |stats| {
@@ -644,6 +662,8 @@ impl Context {
                 stats.cpu_ns = cpu_ns;
                 stats.max_rss_bytes = max_rss_bytes;
                 stats.steps = steps;
+                stats.step_cpu_ns = step_cpu_ns;
+                stats.system_ns = system_ns;
                 registry.write_and_reset_window(stats, window_s);
             });
             if let Err(e) = result {
@@ -653,24 +673,43 @@ impl Context {
     }
 }
 
+/// A process that ends (its run is over, or a SIGTERM asked it to stop) publishes its
+/// statistics once more, so that the launcher counts every step it handled and the CPU it took
+/// (a short run would otherwise be known only by its first report). Nothing for a process with
+/// its statistics silenced.
+impl Drop for Context {
+    fn drop(&mut self) {
+        self.publish_stats();
+    }
+}
+
 /// The port name of a listener that wakes a mole node: publishers ring the node's doorbell.
 fn listener_name() -> Result<iceoryx2::port::port_name::PortName, RuntimeError> {
     iceoryx2::port::port_name::PortName::new(LISTENER_NAME)
         .map_err(|e| RuntimeError::Name(LISTENER_NAME.to_string(), format!("{e:?}")))
 }
 
-/// User + system CPU time (ns) and peak RSS (bytes) of this process.
-fn resource_usage() -> (u64, u64) {
+/// CPU time of the calling thread (ns): user and system, from the kernel's scheduler.
+pub(crate) fn thread_cpu_ns() -> u64 {
+    use nix::time::{ClockId, clock_gettime};
+    clock_gettime(ClockId::CLOCK_THREAD_CPUTIME_ID).map_or(0, |t| {
+        t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64
+    })
+}
+
+/// User + system CPU time (ns), system CPU time (ns) and peak RSS (bytes) of this process.
+fn resource_usage() -> (u64, u64, u64) {
     use nix::sys::resource::{UsageWho, getrusage};
     match getrusage(UsageWho::RUSAGE_SELF) {
         Ok(usage) => {
             let tv_ns = |tv: nix::sys::time::TimeVal| {
                 (tv.tv_sec() as u64) * 1_000_000_000 + (tv.tv_usec() as u64) * 1000
             };
-            let cpu = tv_ns(usage.user_time()) + tv_ns(usage.system_time());
-            (cpu, (usage.max_rss() as u64) * 1024)
+            let system = tv_ns(usage.system_time());
+            let cpu = tv_ns(usage.user_time()) + system;
+            (cpu, system, (usage.max_rss() as u64) * 1024)
         }
-        Err(_) => (0, 0),
+        Err(_) => (0, 0, 0),
     }
 }
 

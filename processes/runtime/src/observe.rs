@@ -1,6 +1,7 @@
 //! The loop of an observer (the monitor, a viewer): it reads every sample of its inputs, in
 //! order, at its own pace, and does something periodically.
 
+use crate::context::thread_cpu_ns;
 use crate::step::{In, Process, Start, follow_map};
 use crate::waitset::Wake;
 use mole_types::Message;
@@ -105,10 +106,16 @@ impl Process {
                 shutdown: wake == Wake::Shutdown,
                 again_in: None,
             };
-            if on_wake(state, &mut observation)? == crate::Flow::End {
+            // An observer's step is a wake with the map in: timed and counted like a step.
+            let start = thread_cpu_ns();
+            let flow = on_wake(state, &mut observation)?;
+            let again_in = observation.again_in;
+            self.ctx.add_step_cpu(start);
+            self.ctx.count_step();
+            if flow == crate::Flow::End {
                 return Ok(());
             }
-            deadline = match observation.again_in {
+            deadline = match again_in {
                 Some(delay) => next_periodic.min(Instant::now() + delay),
                 None => next_periodic,
             };

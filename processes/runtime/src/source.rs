@@ -4,7 +4,7 @@
 //! and holds, or runs on.
 
 use crate::clock::ClockMode;
-use crate::context::Context;
+use crate::context::{Context, thread_cpu_ns};
 use crate::error::RuntimeError;
 use crate::ports::{Subscriber, Waker};
 use crate::step::{Process, Trigger};
@@ -119,7 +119,10 @@ impl Process {
                     reply: None,
                     latency_ns: 0,
                 };
-                if on(event)? == Flow::End {
+                let start = thread_cpu_ns();
+                let flow = on(event)?;
+                self.ctx.add_step_cpu(start);
+                if flow == Flow::End {
                     return operator.finish(Ok(()));
                 }
                 (next_step, last_publish) = (Instant::now() + period, Instant::now());
@@ -190,7 +193,10 @@ impl Process {
                 reply: self.subscriber_mut(reply).latest().filter(|_| !stale),
                 latency_ns: std::mem::take(&mut latency_ns),
             };
-            if on(event)? == Flow::End {
+            let start = thread_cpu_ns();
+            let flow = on(event)?;
+            self.ctx.add_step_cpu(start);
+            if flow == Flow::End {
                 tracing::info!(tick, "run complete");
                 return operator.finish(Ok(()));
             }

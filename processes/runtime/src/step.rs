@@ -657,15 +657,13 @@ impl Process {
                 }
                 before_step(k, state)?;
                 let origin_ns = self.ports[trigger].origin_ns();
-                step(
-                    state,
-                    &Step {
-                        tick: k,
-                        origin_ns,
-                        previous: handled,
-                        ports: &self.ports,
-                    },
-                )?;
+                let this_step = Step {
+                    tick: k,
+                    origin_ns,
+                    previous: handled,
+                    ports: &self.ports,
+                };
+                self.ctx.timed_step(|| step(state, &this_step))?;
                 handled = Some(k);
                 self.ctx.count_step();
             }
