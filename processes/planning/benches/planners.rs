@@ -4,7 +4,9 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use mole_planning::apf::{Apf, ApfConfig};
 use mole_planning::dwa::{Dwa, DwaConfig, DwaState, Sampling};
-use mole_planning::frontier::{FrontierConfig, FrontierSelector};
+use mole_planning::frontier::{
+    FrontierCells, FrontierConfig, FrontierSelector, frontier_cells_full,
+};
 use mole_planning::{DistanceField, Planner, RobotLimits};
 use mole_types::{CELL_FREE, CELL_OCCUPIED, CELL_UNEXPLORED, Grid};
 use std::hint::black_box;
@@ -33,6 +35,40 @@ fn grid(w: usize, h: usize, res: f64) -> Box<Grid> {
         }
     }
     g
+}
+
+/// Scans of a robot driving along the frontier of [`grid`] (400 × 400): each reveals the
+/// unexplored cells of a disc of 14 cells 8 cells further on, and walls a stretch of its rim;
+/// a few hundred cells change per step.
+fn scan_steps(base: &Grid, n: usize) -> Vec<Box<Grid>> {
+    let (w, h) = (base.width as usize, base.height as usize);
+    let mut g: Box<Grid> = bytemuck::zeroed_box();
+    *g = *base;
+    let mut steps = Vec::with_capacity(n);
+    for k in 0..n {
+        let (cc, cr) = (2 * w as i64 / 3 + 2, 30 + 8 * k as i64);
+        for r in (cr - 14).max(1)..(cr + 15).min(h as i64 - 1) {
+            for c in (cc - 14).max(1)..(cc + 15).min(w as i64 - 1) {
+                let d2 = (r - cr) * (r - cr) + (c - cc) * (c - cc);
+                let i = r as usize * w + c as usize;
+                if d2 < 13 * 13 && g.cells[i] == CELL_UNEXPLORED {
+                    g.cells[i] = CELL_FREE;
+                } else if d2 < 14 * 14 && c > cc + 9 && g.cells[i] == CELL_UNEXPLORED {
+                    g.cells[i] = CELL_OCCUPIED;
+                }
+            }
+        }
+        let mut s: Box<Grid> = bytemuck::zeroed_box();
+        *s = *g;
+        steps.push(s);
+    }
+    steps
+}
+
+/// The k-th grid of a back-and-forth walk over `n` grids: each step changes one scan.
+fn ping_pong(k: usize, n: usize) -> usize {
+    let p = k % (2 * n - 2);
+    if p < n { p } else { 2 * n - 2 - p }
 }
 
 fn benches(c: &mut Criterion) {
@@ -100,6 +136,80 @@ fn benches(c: &mut Criterion) {
     sel.select(&big, [3.0, 3.0]);
     c.bench_function("frontier_select_400x400", |b| {
         b.iter(|| black_box(sel.select(black_box(&big), [3.0, 3.0])))
+    });
+
+    // Per step (Keidar & Kaminka 2014, fast frontier detection): the frontier set after one
+    // scan, full pass against the changed cells only, and the whole selection each way.
+    let steps = scan_steps(&big, 40);
+    let n = steps.len();
+    let changed: usize = (1..n)
+        .map(|k| {
+            let (a, b) = (steps[k - 1].cells(), steps[k].cells());
+            a.iter().zip(b).filter(|(x, y)| x != y).count()
+        })
+        .sum();
+    println!(
+        "frontier step: {} cells changed per scan on average",
+        changed / (n - 1)
+    );
+    let mut out = Vec::with_capacity(400 * 400);
+    let mut k = 0;
+    c.bench_function("frontier_cells_full_400x400_step", |b| {
+        b.iter(|| {
+            k += 1;
+            let g = &steps[ping_pong(k, n)];
+            frontier_cells_full(black_box(g.cells()), 400, 400, &mut out);
+            black_box(out.len())
+        })
+    });
+    let mut cells = FrontierCells::with_capacity(400 * 400);
+    cells.update(steps[0].cells(), 400, 400);
+    c.bench_function("frontier_cells_incremental_400x400_step", |b| {
+        b.iter(|| {
+            k += 1;
+            let g = &steps[ping_pong(k, n)];
+            cells.update(black_box(g.cells()), 400, 400);
+            black_box(cells.len())
+        })
+    });
+    let robot = [3.0, 3.0];
+    for (name, full) in [
+        ("frontier_select_full_pass_400x400_step", true),
+        ("frontier_select_incremental_400x400_step", false),
+    ] {
+        let mut sel = FrontierSelector::new(FrontierConfig::default(), 0.2);
+        sel.set_full_pass(full);
+        sel.select(&steps[0], robot);
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                k += 1;
+                black_box(sel.select(black_box(&steps[ping_pong(k, n)]), robot))
+            })
+        });
+    }
+    // The selection's other parts per step: the distance field (rebuilt: the scans wall cells),
+    // the inflation and the Dijkstra search.
+    let mut field400 = DistanceField::with_capacity(400 * 400);
+    c.bench_function("frontier_part_field_update_400x400_step", |b| {
+        b.iter(|| {
+            k += 1;
+            black_box(field400.update(black_box(&steps[ping_pong(k, n)])))
+        })
+    });
+    let mut passable = Vec::with_capacity(400 * 400);
+    c.bench_function("frontier_part_clear_of_400x400", |b| {
+        b.iter(|| field400.clear_of(black_box(0.32), &mut passable))
+    });
+    for (p, c) in passable.iter_mut().zip(steps[n - 1].cells()) {
+        *p &= *c == CELL_FREE;
+    }
+    let mut search = mole_planning::GridSearch::with_capacity(400 * 400);
+    c.bench_function("frontier_part_dijkstra_400x400", |b| {
+        b.iter(|| {
+            let p = &passable;
+            search.dijkstra(400, 400, &|i| p[i], 60 * 400 + 60);
+            black_box(search.settled())
+        })
     });
 
     c.bench_function("distance_field_build_200x200", |b| {

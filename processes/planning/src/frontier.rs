@@ -132,6 +132,183 @@ pub fn is_frontier_cell(cells: &[u8], w: usize, h: usize, i: usize) -> bool {
         || (r + 1 < h && cells[i + w] == CELL_UNEXPLORED)
 }
 
+/// The old detection pass, kept as the oracle: every cell of a `w × h` grid tested with
+/// [`is_frontier_cell`]; writes the frontier cells, in increasing index, into `out`.
+pub fn frontier_cells_full(cells: &[u8], w: usize, h: usize, out: &mut Vec<u32>) {
+    out.clear();
+    out.extend(
+        (0..(w * h).min(cells.len()))
+            .filter_map(|i| is_frontier_cell(cells, w, h, i).then_some(i as u32)),
+    );
+}
+
+/// The label of a cell in no cluster.
+const NOT_FRONTIER: u32 = u32::MAX - 1;
+
+/// Cells compared at once when looking for the cells a grid changed.
+const DIFF_BLOCK: usize = 64;
+
+/// The frontier set F kept from grid to grid by re-testing only the cells a grid changed and
+/// their 4-neighbours (Keidar & Kaminka 2014, fast frontier detection).
+///
+/// The changed cells are found by comparing the grid with a copy of the previous one, 64 cells
+/// at a time. A grid of another shape gets a full pass. Every buffer is reserved for the
+/// largest grid at construction, so no update allocates.
+#[derive(Debug, Clone, Default)]
+pub struct FrontierCells {
+    w: usize,
+    h: usize,
+    /// One bit per cell: whether it is a frontier cell.
+    bits: Vec<u64>,
+    /// Frontier cells in `bits`.
+    count: usize,
+    /// The cells of the grid `bits` was computed from.
+    prev_cells: Vec<u8>,
+    /// Cells the last update found changed (Keidar & Kaminka 2014, fast frontier detection).
+    changed_cells: Vec<u32>,
+    /// Full passes made (the first grid and every change of shape).
+    full_passes: u64,
+}
+
+impl FrontierCells {
+    /// An empty set with buffers for grids of up to `cells` cells.
+    pub fn with_capacity(cells: usize) -> Self {
+        Self {
+            bits: Vec::with_capacity(cells.div_ceil(64)),
+            prev_cells: Vec::with_capacity(cells),
+            changed_cells: Vec::with_capacity(cells),
+            ..Self::default()
+        }
+    }
+
+    /// Brings the set up to date with the `w × h` grid `cells` (row-major, 0/1/2): a full pass
+    /// on the first grid or one of another shape, otherwise only the changed cells and their
+    /// 4-neighbours are re-tested (Keidar & Kaminka 2014, fast frontier detection). Returns
+    /// whether it made a full pass.
+    pub fn update(&mut self, cells: &[u8], w: usize, h: usize) -> bool {
+        let n = w * h;
+        let cells = &cells[..n.min(cells.len())];
+        if (w, h) != (self.w, self.h) || self.prev_cells.len() != n || cells.len() != n {
+            self.full_pass(cells, w, h);
+            return true;
+        }
+        self.changed_cells.clear();
+        let blocks = self
+            .prev_cells
+            .chunks_mut(DIFF_BLOCK)
+            .zip(cells.chunks(DIFF_BLOCK));
+        for (b, (prev, now)) in blocks.enumerate() {
+            if prev != now {
+                let base = b * DIFF_BLOCK;
+                let diff = prev
+                    .iter()
+                    .zip(now)
+                    .enumerate()
+                    .filter(|(_, (p, q))| p != q);
+                self.changed_cells
+                    .extend(diff.map(|(k, _)| (base + k) as u32));
+                prev.copy_from_slice(now);
+            }
+        }
+        for k in 0..self.changed_cells.len() {
+            let i = self.changed_cells[k] as usize;
+            let (c, r) = (i % w, i / w);
+            self.retest(cells, i);
+            if c > 0 {
+                self.retest(cells, i - 1);
+            }
+            if c + 1 < w {
+                self.retest(cells, i + 1);
+            }
+            if r > 0 {
+                self.retest(cells, i - w);
+            }
+            if r + 1 < h {
+                self.retest(cells, i + w);
+            }
+        }
+        false
+    }
+
+    /// Every cell tested (the first grid, a change of shape).
+    pub fn full_pass(&mut self, cells: &[u8], w: usize, h: usize) {
+        let n = if cells.len() == w * h { w * h } else { 0 };
+        (self.w, self.h) = if n > 0 { (w, h) } else { (0, 0) };
+        self.bits.clear();
+        self.bits.resize(n.div_ceil(64), 0);
+        self.count = 0;
+        for (k, word) in self.bits.iter_mut().enumerate() {
+            for j in 0..64.min(n - 64 * k) {
+                if is_frontier_cell(cells, w, h, 64 * k + j) {
+                    *word |= 1 << j;
+                    self.count += 1;
+                }
+            }
+        }
+        self.prev_cells.clear();
+        self.prev_cells.extend_from_slice(&cells[..n]);
+        self.changed_cells.clear();
+        self.full_passes += 1;
+    }
+
+    /// Re-tests cell `i` against [`is_frontier_cell`].
+    #[inline]
+    fn retest(&mut self, cells: &[u8], i: usize) {
+        let (word, bit) = (&mut self.bits[i / 64], 1u64 << (i % 64));
+        let was = *word & bit != 0;
+        let is = is_frontier_cell(cells, self.w, self.h, i);
+        if was != is {
+            *word ^= bit;
+            if is {
+                self.count += 1;
+            } else {
+                self.count -= 1;
+            }
+        }
+    }
+
+    /// Whether cell `i` is a frontier cell.
+    pub fn contains(&self, i: usize) -> bool {
+        self.bits
+            .get(i / 64)
+            .is_some_and(|w| w & (1 << (i % 64)) != 0)
+    }
+
+    /// The frontier cells, in increasing index.
+    pub fn iter(&self) -> impl Iterator<Item = usize> + '_ {
+        self.bits.iter().enumerate().flat_map(|(k, &word)| {
+            let mut rest = word;
+            core::iter::from_fn(move || {
+                (rest != 0).then(|| {
+                    let j = rest.trailing_zeros() as usize;
+                    rest &= rest - 1;
+                    64 * k + j
+                })
+            })
+        })
+    }
+
+    /// How many frontier cells there are.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// Whether there is no frontier cell.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// The cells the last update found changed (empty after a full pass).
+    pub fn changed_cells(&self) -> &[u32] {
+        &self.changed_cells
+    }
+
+    /// Full passes made so far.
+    pub fn full_passes(&self) -> u64 {
+        self.full_passes
+    }
+}
+
 /// The detection, clustering, scoring and path machinery, with every buffer preallocated.
 #[derive(Debug, Clone)]
 pub struct FrontierSelector {
@@ -144,7 +321,15 @@ pub struct FrontierSelector {
     field: DistanceField,
     search: GridSearch,
     passable: Vec<bool>,
+    /// The frontier set, updated from the cells each grid changed (Keidar & Kaminka 2014,
+    /// fast frontier detection).
+    frontier_cells: FrontierCells,
+    /// Whether every selection re-tests every cell (the old full pass; benches and tests).
+    full_pass: bool,
+    /// Per cell: its cluster at the last selection, or `NOT_FRONTIER`.
     label: Vec<u32>,
+    /// Cells labelled with a cluster at the last selection, in increasing index.
+    labelled: Vec<u32>,
     stack: Vec<u32>,
     integral: Vec<u32>,
     candidates: Vec<Frontier>,
@@ -181,7 +366,10 @@ impl FrontierSelector {
             field: DistanceField::with_capacity(n),
             search: GridSearch::with_capacity(n),
             passable: Vec::with_capacity(n),
+            frontier_cells: FrontierCells::with_capacity(n),
+            full_pass: false,
             label: Vec::with_capacity(n),
+            labelled: Vec::with_capacity(n),
             stack: Vec::with_capacity(n),
             integral: Vec::with_capacity(n + 1024),
             candidates: Vec::with_capacity(n / 4),
@@ -253,6 +441,18 @@ impl FrontierSelector {
         self.integral.last().copied().unwrap_or(0)
     }
 
+    /// The frontier set of the last grid selected on.
+    pub fn frontier_cells(&self) -> &FrontierCells {
+        &self.frontier_cells
+    }
+
+    /// With `yes`, every selection tests and labels every cell, the full pass before Keidar &
+    /// Kaminka 2014, fast frontier detection (benches and tests compare the two); the frontier
+    /// set is then not kept.
+    pub fn set_full_pass(&mut self, yes: bool) {
+        self.full_pass = yes;
+    }
+
     /// The candidates of the last selection.
     pub fn candidates(&self) -> &[Frontier] {
         &self.candidates
@@ -298,6 +498,9 @@ impl FrontierSelector {
         let (w, h) = (grid.width as usize, grid.height as usize);
         if w == 0 || h == 0 || cells.len() != w * h {
             return None;
+        }
+        if !self.full_pass {
+            self.frontier_cells.update(cells, w, h);
         }
         if (self.w, self.h) != (w, h) || self.exhausted.len() != w * h {
             self.exhausted.clear();
@@ -357,22 +560,45 @@ impl FrontierSelector {
                 self.integral[(r + 1) * (w + 1) + c + 1] = self.integral[r * (w + 1) + c + 1] + run;
             }
         }
-        // Clusters: 8-connected flood fill over the frontier cells.
+        // Clusters: 8-connected flood fill over the frontier cells, seeded in increasing index
+        // from the frontier set (Keidar & Kaminka 2014, fast frontier detection): only the
+        // cells labelled last time are reset, not the whole grid.
         const UNSEEN: u32 = u32::MAX;
-        const NOT_FRONTIER: u32 = u32::MAX - 1;
-        self.label.clear();
+        if self.label.len() != w * h {
+            self.label.clear();
+            self.label.resize(w * h, NOT_FRONTIER);
+            self.labelled.clear();
+        }
+        for &i in &self.labelled {
+            self.label[i as usize] = NOT_FRONTIER;
+        }
+        self.labelled.clear();
         let (exhausted, given_up, retrying) = (&self.exhausted, &self.given_up, self.retrying);
         let open = |i: usize| !exhausted[i] && (given_up[i] == 0 || (retrying && given_up[i] == 1));
-        self.label.extend((0..w * h).map(|i| {
-            if is_frontier_cell(cells, w, h, i) && open(i) {
-                UNSEEN
-            } else {
-                NOT_FRONTIER
+        if self.full_pass {
+            // The old pass: every cell tested, every label written.
+            for (i, l) in self.label.iter_mut().enumerate() {
+                *l = if is_frontier_cell(cells, w, h, i) && open(i) {
+                    UNSEEN
+                } else {
+                    NOT_FRONTIER
+                };
             }
-        }));
+            let label = &self.label;
+            self.labelled
+                .extend((0..w * h).filter(|&i| label[i] == UNSEEN).map(|i| i as u32));
+        } else {
+            for i in self.frontier_cells.iter() {
+                if open(i) {
+                    self.label[i] = UNSEEN;
+                    self.labelled.push(i as u32);
+                }
+            }
+        }
         let gain_cells = (self.config.gain_radius / res).round().max(0.0) as usize;
         let mut n_clusters = 0u32;
-        for seed in 0..w * h {
+        for k in 0..self.labelled.len() {
+            let seed = self.labelled[k] as usize;
             if self.label[seed] != UNSEEN {
                 continue;
             }
@@ -1097,5 +1323,194 @@ mod tests {
             st.flags & STATUS_EXPLORATION_COMPLETE,
             STATUS_EXPLORATION_COMPLETE
         );
+    }
+}
+
+/// Keidar & Kaminka 2014, fast frontier detection: the frontier set kept from the cells each
+/// grid changed equals the full pass after every grid, and so do the selections.
+#[cfg(test)]
+mod incremental {
+    use super::*;
+    use crate::obstacles::test_support::grid_free;
+    use proptest::prelude::*;
+
+    const SIDE: core::ops::Range<usize> = 8..40;
+    const MAX_SIDE: usize = 40;
+
+    /// A cell value: mostly free, some unexplored, fewer occupied.
+    fn cell() -> impl Strategy<Value = u8> {
+        (0u8..10).prop_map(|v| match v {
+            0..=2 => CELL_UNEXPLORED,
+            3..=8 => CELL_FREE,
+            _ => mole_types::CELL_OCCUPIED,
+        })
+    }
+
+    /// One new grid: `kind` 0 a new shape filled from `fill`, 1-3 changes at the borders,
+    /// 4-5 a changed block (a scan), else changes anywhere.
+    #[derive(Debug, Clone)]
+    struct Step {
+        kind: u8,
+        changes: Vec<(usize, u8)>,
+        dims: (usize, usize),
+        fill: Vec<u8>,
+        robot: (f64, f64),
+    }
+
+    fn step() -> impl Strategy<Value = Step> {
+        (
+            0u8..10,
+            prop::collection::vec((0usize..10_000, cell()), 0..30),
+            (SIDE, SIDE),
+            prop::collection::vec(cell(), MAX_SIDE * MAX_SIDE),
+            (0.0..1.0f64, 0.0..1.0f64),
+        )
+            .prop_map(|(kind, changes, dims, fill, robot)| Step {
+                kind,
+                changes,
+                dims,
+                fill,
+                robot,
+            })
+    }
+
+    fn grid_of(w: usize, h: usize, fill: &[u8]) -> Box<Grid> {
+        let mut g = grid_free(w as u32, h as u32, 0.1);
+        g.cells[..w * h].copy_from_slice(&fill[..w * h]);
+        g
+    }
+
+    /// Applies `s` to `g`; returns the robot's position.
+    fn apply(g: &mut Box<Grid>, s: &Step) -> [f64; 2] {
+        let (w, h) = (g.width as usize, g.height as usize);
+        match s.kind {
+            0 => *g = grid_of(s.dims.0, s.dims.1, &s.fill),
+            1..=3 => {
+                // The border ring, cell by cell.
+                let ring = 2 * (w + h) - 4;
+                for &(k, v) in &s.changes {
+                    let k = k % ring;
+                    let i = if k < w {
+                        k
+                    } else if k < 2 * w {
+                        (h - 1) * w + k - w
+                    } else {
+                        let k = k - 2 * w;
+                        (k / 2 + 1) * w + if k % 2 == 0 { 0 } else { w - 1 }
+                    };
+                    g.cells[i] = v;
+                }
+            }
+            4 | 5 => {
+                // A block around the first change, filled from `fill` (a scan's footprint).
+                if let Some(&(k, _)) = s.changes.first() {
+                    let (c0, r0) = ((k % w).saturating_sub(3), (k / w % h).saturating_sub(3));
+                    for r in r0..(r0 + 7).min(h) {
+                        for c in c0..(c0 + 7).min(w) {
+                            g.cells[r * w + c] = s.fill[r * w + c];
+                        }
+                    }
+                }
+            }
+            _ => {
+                for &(k, v) in &s.changes {
+                    g.cells[k % (w * h)] = v;
+                }
+            }
+        }
+        let (w, h) = (g.width as f64, g.height as f64);
+        [s.robot.0 * w * 0.1, s.robot.1 * h * 0.1]
+    }
+
+    fn oracle(g: &Grid) -> Vec<u32> {
+        let mut out = Vec::new();
+        frontier_cells_full(g.cells(), g.width as usize, g.height as usize, &mut out);
+        out
+    }
+
+    fn config(min_cluster: usize) -> FrontierConfig {
+        FrontierConfig {
+            min_cluster,
+            gain_radius: 0.3,
+            inflation_margin: 0.0,
+            ..FrontierConfig::default()
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        /// The frontier set after every grid equals the full pass over it.
+        #[test]
+        fn frontier_cells_equal_the_full_pass(
+            dims in (SIDE, SIDE),
+            fill in prop::collection::vec(cell(), MAX_SIDE * MAX_SIDE),
+            steps in prop::collection::vec(step(), 1..16),
+        ) {
+            let mut g = grid_of(dims.0, dims.1, &fill);
+            let mut f = FrontierCells::with_capacity(MAX_GRID_CELLS);
+            for (k, s) in std::iter::once(None).chain(steps.iter().map(Some)).enumerate() {
+                if let Some(s) = s {
+                    apply(&mut g, s);
+                }
+                f.update(g.cells(), g.width as usize, g.height as usize);
+                let full = oracle(&g);
+                let kept: Vec<u32> = f.iter().map(|i| i as u32).collect();
+                prop_assert_eq!(&kept, &full, "grid {} ({}x{})", k, g.width, g.height);
+                prop_assert_eq!(f.len(), full.len());
+            }
+        }
+
+        /// `select` with the frontier set kept from grid to grid gives the same candidates,
+        /// frontier and path as one making the old full pass, and, until a frontier is
+        /// exhausted or given up, as a fresh selector.
+        #[test]
+        fn selection_equals_the_full_pass(
+            dims in (SIDE, SIDE),
+            fill in prop::collection::vec(cell(), MAX_SIDE * MAX_SIDE),
+            steps in prop::collection::vec(step(), 1..12),
+            min_cluster in 1usize..5,
+            radius in prop::sample::select(vec![0.05, 0.12]),
+        ) {
+            let mut g = grid_of(dims.0, dims.1, &fill);
+            let mut kept = FrontierSelector::new(config(min_cluster), radius);
+            let mut full = FrontierSelector::new(config(min_cluster), radius);
+            full.set_full_pass(true);
+            let mut exhausted = false;
+            let mut robot = [0.5 * dims.0 as f64 * 0.1, 0.5 * dims.1 as f64 * 0.1];
+            for (k, s) in std::iter::once(None).chain(steps.iter().map(Some)).enumerate() {
+                if let Some(s) = s {
+                    robot = apply(&mut g, s);
+                }
+                let mut fresh = FrontierSelector::new(config(min_cluster), radius);
+                let a = kept.select(&g, robot);
+                let b = full.select(&g, robot);
+                let c = fresh.select(&g, robot);
+                let kept_cells: Vec<u32> =
+                    kept.frontier_cells().iter().map(|i| i as u32).collect();
+                prop_assert_eq!(kept_cells, oracle(&g), "grid {}", k);
+                prop_assert_eq!(a, b, "grid {}", k);
+                if !exhausted {
+                    prop_assert_eq!(a, c, "grid {}", k);
+                    prop_assert_eq!(kept.candidates(), fresh.candidates(), "grid {}", k);
+                    prop_assert_eq!(kept.path(), fresh.path(), "grid {}", k);
+                }
+                prop_assert_eq!(kept.candidates(), full.candidates(), "grid {}", k);
+                prop_assert_eq!(kept.path(), full.path(), "grid {}", k);
+                prop_assert_eq!(&kept.label, &full.label, "grid {}", k);
+                // Now and then the chosen frontier is exhausted or given up, in both.
+                if let (Some(f), Some(s)) = (a, s) {
+                    if s.kind == 7 {
+                        kept.exhaust(f.cell);
+                        full.exhaust(f.cell);
+                        exhausted = true;
+                    } else if s.kind == 8 {
+                        kept.exhaust_around(f.cell, 0.3);
+                        full.exhaust_around(f.cell, 0.3);
+                        exhausted = true;
+                    }
+                }
+            }
+        }
     }
 }
