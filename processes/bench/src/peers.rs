@@ -385,23 +385,63 @@ struct Dora {
     node: PathBuf,
 }
 
-/// Kills and reaps `dora run` (and so its nodes) when dropped, whatever happened.
-struct DoraRun(Child);
+/// Kills and reaps `dora run` (and so its nodes) when dropped, whatever happened, then removes
+/// the zenoh shared-memory segments that appeared in `/dev/shm` while it ran: dora's data plane
+/// is zenoh's shared memory, and `dora run` 1.1 exits without removing its segment (zenoh
+/// removes stale ones only when a later process starts).
+struct DoraRun {
+    child: Child,
+    segments_before: Vec<PathBuf>,
+}
+
+/// zenoh's shared-memory segments (`/dev/shm/<id>.zenoh`).
+fn zenoh_segments() -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "zenoh"))
+        .collect()
+}
+
+impl DoraRun {
+    fn spawn(command: &mut Command) -> Result<DoraRun, BenchError> {
+        let segments_before = zenoh_segments();
+        let child = command.spawn().map_err(BenchError::Spawn)?;
+        Ok(DoraRun {
+            child,
+            segments_before,
+        })
+    }
+}
 
 impl Drop for DoraRun {
     fn drop(&mut self) {
-        if let Ok(None) = self.0.try_wait() {
+        self.stop();
+        for segment in zenoh_segments() {
+            if !self.segments_before.contains(&segment) {
+                let _ = std::fs::remove_file(segment);
+            }
+        }
+    }
+}
+
+impl DoraRun {
+    fn stop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
             let _ = nix::sys::signal::kill(
-                nix::unistd::Pid::from_raw(self.0.id() as i32),
+                nix::unistd::Pid::from_raw(self.child.id() as i32),
                 nix::sys::signal::Signal::SIGINT,
             );
             let deadline = Instant::now() + Duration::from_secs(5);
-            while Instant::now() < deadline && matches!(self.0.try_wait(), Ok(None)) {
+            while Instant::now() < deadline && matches!(self.child.try_wait(), Ok(None)) {
                 std::thread::sleep(Duration::from_millis(10));
             }
-            let _ = self.0.kill();
+            let _ = self.child.kill();
         }
-        let _ = self.0.wait();
+        let _ = self.child.wait();
     }
 }
 
@@ -496,18 +536,17 @@ impl Dora {
             .map_err(io("write the dataflow"))?;
         let log_path = dir.join("dora.log");
         let log = std::fs::File::create(&log_path).map_err(io("dora's log"))?;
-        let child = Command::new(&self.cli)
-            .arg("run")
-            .arg(&flow)
-            .current_dir(&dir)
-            .stdin(Stdio::null())
-            .stdout(log.try_clone().map_err(io("dora's log"))?)
-            .stderr(log)
-            .spawn()
-            .map_err(BenchError::Spawn)?;
-        let mut run = DoraRun(child);
+        let mut run = DoraRun::spawn(
+            Command::new(&self.cli)
+                .arg("run")
+                .arg(&flow)
+                .current_dir(&dir)
+                .stdin(Stdio::null())
+                .stdout(log.try_clone().map_err(io("dora's log"))?)
+                .stderr(log),
+        )?;
         let failed = |run: &mut DoraRun, why: String| {
-            let status = run.0.try_wait().ok().flatten();
+            let status = run.child.try_wait().ok().flatten();
             let tail = std::fs::read_to_string(&log_path).unwrap_or_default();
             let tail: Vec<&str> = tail.lines().rev().take(8).collect();
             let tail: Vec<&str> = tail.into_iter().rev().collect();
@@ -524,7 +563,7 @@ impl Dora {
             match listener.accept() {
                 Ok((stream, _)) => break stream,
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                    if matches!(run.0.try_wait(), Ok(Some(_))) {
+                    if matches!(run.child.try_wait(), Ok(Some(_))) {
                         return Err(failed(
                             &mut run,
                             "the dataflow ended before its source connected".into(),
@@ -595,7 +634,7 @@ impl Dora {
         writeln!(replies, "ok").map_err(io("marks socket"))?;
         let deadline = Instant::now() + Duration::from_secs(20);
         loop {
-            match run.0.try_wait() {
+            match run.child.try_wait() {
                 Ok(Some(status)) if status.success() => break,
                 Ok(Some(status)) => {
                     return Err(failed(&mut run, format!("dora run ended with {status}")));

@@ -2,7 +2,7 @@
 //! (scripts/dora-env.sh installs dora; without it the dora rows are skipped with the reason, and
 //! under CI this test fails instead). Counts, no timing assertions: every build brings back
 //! every loop it was asked for, in order; a paced loop keeps its pace; every number is positive;
-//! and nothing of the run is left behind.
+//! and nothing of the run is left behind (no node, no file, no shared memory of dora's).
 
 use mole_bench::live_bench_nodes;
 use mole_bench::peers::{Peer, PeerBenchConfig, run_peer_bench};
@@ -19,6 +19,7 @@ fn every_build_brings_back_every_loop() {
         require_dora: ci,
         ..PeerBenchConfig::quick()
     };
+    let zenoh_before = zenoh_segments();
     let report = run_peer_bench(&config).expect("the quick run succeeds");
     let mut peers = vec![Peer::RawIceoryx2, Peer::Mole];
     match report.skipped.as_slice() {
@@ -75,4 +76,24 @@ fn every_build_brings_back_every_loop() {
         .filter(|e| e.file_name().to_string_lossy().contains(&config.namespace))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+    let zenoh_after = zenoh_segments();
+    let left: Vec<_> = zenoh_after
+        .iter()
+        .filter(|s| !zenoh_before.contains(s))
+        .collect();
+    assert!(
+        left.is_empty(),
+        "dora's shared memory left in /dev/shm: {left:?}"
+    );
+}
+
+/// zenoh's shared-memory segments, which dora's data plane creates.
+fn zenoh_segments() -> Vec<PathBuf> {
+    std::fs::read_dir("/dev/shm")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "zenoh"))
+        .collect()
 }
