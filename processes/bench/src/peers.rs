@@ -488,9 +488,11 @@ impl Dora {
         (warm, loops): (usize, usize),
         paced: Option<Duration>,
         marks: &Path,
+        timeout_ms: u64,
     ) -> String {
         let node = self.node.display();
-        // Flat out the timer only starts the first loop (and is otherwise ignored).
+        // Flat out the timer starts the first loop, then only checks that the loop in flight
+        // comes back within the timeout (a stage killed would otherwise hang the run).
         let tick_ms = paced.map_or(50, |p| p.as_millis().max(1));
         let pacing = if paced.is_some() { " --paced" } else { "" };
         let stage = |id: &str, from: &str| {
@@ -501,7 +503,7 @@ impl Dora {
         };
         format!(
             "nodes:\n  - id: source\n    path: {node}\n    args: source --size {size} --warm {warm} \
-             --loops {loops}{pacing} --marks {marks}\n    inputs:\n      tick: \
+             --loops {loops}{pacing} --marks {marks} --timeout-ms {timeout_ms}\n    inputs:\n      tick: \
              dora/timer/millis/{tick_ms}\n      back: sink/out\n    outputs:\n      - out\n{}{}{}",
             stage("stage1", "source"),
             stage("stage2", "stage1"),
@@ -532,8 +534,11 @@ impl Dora {
         listener.set_nonblocking(true).map_err(io("marks socket"))?;
         let flow = dir.join("dataflow.yml");
         let period = paced.then(|| config.period());
-        std::fs::write(&flow, self.dataflow(size, (warm, loops), period, &marks))
-            .map_err(io("write the dataflow"))?;
+        std::fs::write(
+            &flow,
+            self.dataflow(size, (warm, loops), period, &marks, config.timeout_ms),
+        )
+        .map_err(io("write the dataflow"))?;
         let log_path = dir.join("dora.log");
         let log = std::fs::File::create(&log_path).map_err(io("dora's log"))?;
         let mut run = DoraRun::spawn(
@@ -747,7 +752,7 @@ mod tests {
             cli: "dora".into(),
             node: "/bin/peer".into(),
         };
-        let flat = dora.dataflow(64, (10, 100), None, Path::new("/tmp/m.sock"));
+        let flat = dora.dataflow(64, (10, 100), None, Path::new("/tmp/m.sock"), 5000);
         assert!(flat.contains("back: sink/out"), "{flat}");
         assert!(flat.contains("in: source/out") && flat.contains("in: stage1/out"));
         assert!(flat.contains("in: stage2/out"));
@@ -757,8 +762,10 @@ mod tests {
             (3, 20),
             Some(Duration::from_millis(10)),
             Path::new("/m"),
+            250,
         );
         assert!(paced.contains("dora/timer/millis/10") && paced.contains("--paced"));
+        assert!(paced.contains("--timeout-ms 250"));
         assert!(paced.contains("--size 4096 --warm 3 --loops 20"));
     }
 

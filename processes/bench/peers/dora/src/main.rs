@@ -15,7 +15,7 @@ use std::time::Instant;
 
 type Failure = Box<dyn std::error::Error>;
 
-/// The command line: `source --size N --warm N --loops N --paced --marks PATH` or
+/// The command line: `source --size N --warm N --loops N --paced --marks PATH --timeout-ms T` or
 /// `forward --size N`.
 struct Args {
     source: bool,
@@ -24,6 +24,8 @@ struct Args {
     loops: u64,
     paced: bool,
     marks: String,
+    /// How long one loop may take before the source gives up (a stage is gone).
+    timeout: std::time::Duration,
 }
 
 fn parse_args() -> Result<Args, Failure> {
@@ -42,6 +44,7 @@ fn parse_args() -> Result<Args, Failure> {
         loops: 1000,
         paced: false,
         marks: String::new(),
+        timeout: std::time::Duration::from_secs(5),
     };
     while let Some(flag) = argv.next() {
         let mut value = || argv.next().ok_or(format!("{flag} needs a value"));
@@ -50,6 +53,9 @@ fn parse_args() -> Result<Args, Failure> {
             "--warm" => args.warm = value()?.parse()?,
             "--loops" => args.loops = value()?.parse()?,
             "--marks" => args.marks = value()?,
+            "--timeout-ms" => {
+                args.timeout = std::time::Duration::from_millis(value()?.parse()?);
+            }
             "--paced" => args.paced = true,
             other => return Err(format!("unknown option `{other}`").into()),
         }
@@ -136,6 +142,16 @@ fn source(
     while let Some(event) = events.recv() {
         match event {
             Event::Input { id, .. } if id.as_str() == "tick" => {
+                if let Some(sent) = sent_at
+                    && sent.elapsed() > args.timeout
+                {
+                    // The bench reads the closed socket as the failure, with dora's log.
+                    return Err(format!(
+                        "loop {seq} did not come back within {:?}: a stage is gone",
+                        args.timeout
+                    )
+                    .into());
+                }
                 if sent_at.is_none() && (args.paced || seq == 0) {
                     sent_at = Some(Instant::now());
                     send(&mut node, seq)?;
