@@ -68,12 +68,11 @@ fn hop_topic(names: &'static [&'static str], i: usize) -> PortSpec {
     }
 }
 
-/// The topics of a chain-like kind (the chain or the loop), and its number of hops.
-fn hops_of(kind: ProbeKind) -> Option<(&'static [&'static str], usize)> {
+/// The topics of the loop, else of the chain: one more than its hops.
+fn hop_names(kind: ProbeKind) -> &'static [&'static str] {
     match kind {
-        ProbeKind::Chain => Some((&CHAIN_NAMES, CHAIN_HOPS)),
-        ProbeKind::Loop => Some((&LOOP_NAMES, LOOP_STAGES)),
-        _ => None,
+        ProbeKind::Loop => &LOOP_NAMES,
+        _ => &CHAIN_NAMES,
     }
 }
 
@@ -84,8 +83,12 @@ pub(crate) fn driver_ports(kind: ProbeKind) -> Ports {
         ProbeKind::Fanout => (FANOUT, None, Some(ACK)),
         ProbeKind::Throughput => (FLOOD, None, Some(ACK)),
         ProbeKind::Chain | ProbeKind::Loop => {
-            let (names, hops) = hops_of(kind).unwrap_or((&CHAIN_NAMES, CHAIN_HOPS));
-            (hop_topic(names, 0), Some(hop_topic(names, hops)), None)
+            let names = hop_names(kind);
+            (
+                hop_topic(names, 0),
+                Some(hop_topic(names, names.len() - 1)),
+                None,
+            )
         }
     };
     Ports {
@@ -108,7 +111,8 @@ pub(crate) fn probe_ports(kind: ProbeKind, id: usize) -> Result<Ports, BenchErro
         ProbeKind::Fanout => echo(FANOUT),
         ProbeKind::Throughput => echo(FLOOD),
         ProbeKind::Chain | ProbeKind::Loop => {
-            let (names, hops) = hops_of(kind).unwrap_or((&CHAIN_NAMES, CHAIN_HOPS));
+            let names = hop_names(kind);
+            let hops = names.len() - 1;
             if id >= hops {
                 return Err(BenchError::Config(format!(
                     "hop {id} does not exist (0..{hops})"
