@@ -302,7 +302,18 @@ pub fn wilson_interval(p: f64, n: usize) -> [f64; 2] {
     let denom = 1.0 + z * z / n;
     let centre = (p + z * z / (2.0 * n)) / denom;
     let half = z * (p * (1.0 - p) / n + z * z / (4.0 * n * n)).sqrt() / denom;
-    [(centre - half).max(0.0), (centre + half).min(1.0)]
+    // At p = 0 (p = 1) centre and half are equal in exact arithmetic; rounding left 7e-18.
+    let lo = if p <= 0.0 {
+        0.0
+    } else {
+        (centre - half).max(0.0)
+    };
+    let hi = if p >= 1.0 {
+        1.0
+    } else {
+        (centre + half).min(1.0)
+    };
+    [lo, hi]
 }
 
 /// The 95% interval of the mean from Student's t with n − 1 degrees of freedom (the mean itself
@@ -377,9 +388,12 @@ pub fn regressions(
             )));
             continue;
         };
+        // A mean equal to the bound but for rounding (reports stored before the Wilson bounds
+        // were exact hold 7e-18 for 0) is not worse.
+        let slack = |bound: f64| 1e-12 * bound.abs().max(1.0);
         let worse = match direction {
-            Direction::Higher => current.mean < base.ci95[0],
-            Direction::Lower => current.mean > base.ci95[1],
+            Direction::Higher => current.mean < base.ci95[0] - slack(base.ci95[0]),
+            Direction::Lower => current.mean > base.ci95[1] + slack(base.ci95[1]),
         };
         if worse {
             out.push(Ok(Regression {
@@ -472,7 +486,10 @@ mod tests {
         );
         assert!((wilson_interval(1.0, 10)[1] - 1.0).abs() < 1e-12);
         assert!(wilson_interval(1.0, 10)[0] > 0.69 && wilson_interval(1.0, 10)[0] < 0.73);
-        assert_eq!(wilson_interval(0.0, 10)[0], 0.0);
+        for n in [10, 50, 263] {
+            assert_eq!(wilson_interval(0.0, n)[0], 0.0, "{n}");
+            assert_eq!(wilson_interval(1.0, n)[1], 1.0, "{n}");
+        }
     }
 
     /// Student's interval of 1..=5: mean 3, s = 1.5811, t(4) = 2.7764 → 3 ± 1.9632.
@@ -516,6 +533,13 @@ mod tests {
         base_worlds[0].localization_rmse_m = Some(0.03);
         let base = aggregate(&base_worlds);
         assert!(regressions(&base, &base).is_empty());
+        // A rate of 0 against a stored interval whose lower bound rounding left at 7e-18.
+        let mut stored = aggregate(&worlds([false; 4], 0.02, 5.0));
+        if let Some(success) = stored.get_mut("success") {
+            success.ci95[0] = 6.938_893_903_907_228e-18;
+        }
+        let zero = aggregate(&worlds([false; 4], 0.02, 5.0));
+        assert!(regressions(&stored, &zero).is_empty());
         let mut now = worlds([true, false, false, false], 0.05, 50.0);
         now[0].localization_rmse_m = Some(0.06);
         let found: Vec<String> = regressions(&base, &aggregate(&now))
