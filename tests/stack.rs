@@ -334,36 +334,56 @@ fn two_stacks_in_two_namespaces_run_side_by_side_without_interfering() {
 /// Position RMSE bounds per estimator on 1500 lockstep steps of the default scenario: a quarter
 /// of the robot radius (5 cm) for the filters that fuse beacons, which keeps the maps they
 /// build within one grid cell; the KF sees only the position fix every second, so it gets 12 cm.
+/// The particle filter with KLD-sampling keeps the same bound with a smaller set, whose size
+/// over the run summary.json reports.
 #[test]
 fn every_estimator_localizes_within_its_bound() {
     let _serial = serial();
-    for (estimator, bound) in [
-        (EstimatorKind::Ekf, 0.05),
-        (EstimatorKind::Pf, 0.05),
-        (EstimatorKind::Bayes, 0.08),
-        (EstimatorKind::Kf, 0.12),
+    let kld = ["--set", "localization.pf.kld=true"];
+    for (estimator, bound, extra) in [
+        (EstimatorKind::Ekf, 0.05, &[][..]),
+        (EstimatorKind::Pf, 0.05, &[][..]),
+        (EstimatorKind::Pf, 0.05, &kld[..]),
+        (EstimatorKind::Bayes, 0.08, &[][..]),
+        (EstimatorKind::Kf, 0.12, &[][..]),
     ] {
-        let stack = Stack::start(
-            &format!("est-{estimator}"),
-            &[
-                "--mode",
-                "lockstep",
-                "--ticks",
-                "1500",
-                "--seed",
-                "3",
-                "--estimator",
-                estimator.name(),
-            ],
-        );
+        let mut args = vec![
+            "--mode",
+            "lockstep",
+            "--ticks",
+            "1500",
+            "--seed",
+            "3",
+            "--estimator",
+            estimator.name(),
+        ];
+        args.extend_from_slice(extra);
+        let stack = Stack::start(&format!("est-{estimator}-{}", extra.len()), &args);
         let out = stack.out.clone();
         let (output, logs, summary) = stack_wait_keep(stack, &out);
         assert!(output.status.success(), "{estimator}: {logs}");
         let summary = summary.expect("a summary");
         assert_eq!(summary.estimator, estimator.name());
         let rmse = finite(&summary, "localization_rmse_m", summary.localization_rmse_m);
-        assert!(rmse < bound, "{estimator}: RMSE {rmse} m ≥ {bound} m");
+        assert!(
+            rmse < bound,
+            "{estimator} {extra:?}: RMSE {rmse} m ≥ {bound} m"
+        );
         finite(&summary, "mean_nees", summary.mean_nees);
+        let particles = summary.particles.as_ref();
+        match (estimator, extra.is_empty()) {
+            (EstimatorKind::Pf, true) => {
+                let p = particles.expect("the particle counts");
+                assert_eq!((p.min, p.max, p.series.len()), (10_000, 10_000, 1), "{p:?}");
+            }
+            (EstimatorKind::Pf, false) => {
+                // Sized by the belief from the first resampling on: the beacons keep it tight,
+                // so the set stays far below the most, 10,000.
+                let p = particles.expect("the particle counts");
+                assert!(p.max <= 10_000 && p.mean < 5_000.0, "{p:?}");
+            }
+            _ => assert!(particles.is_none(), "{estimator}: {particles:?}"),
+        }
     }
 }
 

@@ -379,18 +379,18 @@ _check(Particle, 16, 4, [0, 4, 8, 12])
 
 
 class Particles(ctypes.Structure):
-    """`mole.Particles.v1`: 262184 bytes, alignment 8."""
+    """`mole.Particles.v2`: 262184 bytes, alignment 8."""
 
     _fields_ = [
         ("header", Header),
         ("n_particles", ctypes.c_uint32),
-        ("_pad", ctypes.c_uint32),
+        ("n_filter", ctypes.c_uint32),
         ("particles", Particle * 16384),
     ]
 
     @classmethod
     def type_name(cls) -> str:
-        return "mole.Particles.v1"
+        return "mole.Particles.v2"
 
 
 _check(Particles, 262184, 8, [0, 32, 36, 40])

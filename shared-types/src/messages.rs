@@ -578,13 +578,16 @@ pub struct Particle {
 /// `localization/particles`: the particle set Ψ (algorithms §6.7), when the PF runs.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Message)]
-#[type_name("mole.Particles.v1")]
+#[type_name("mole.Particles.v2")]
 #[layout(size = 40 + 16 * MAX_PARTICLES)]
 #[message(check = Particles::check)]
 pub struct Particles {
     pub header: Header,
+    /// Particles in this message.
     pub n_particles: u32,
-    pub _pad: u32,
+    /// Particles the filter holds: more than `n_particles` when the message carries an evenly
+    /// strided subset of a larger set; it changes over a run with KLD-sampling.
+    pub n_filter: u32,
     pub particles: [Particle; MAX_PARTICLES],
 }
 
@@ -598,6 +601,9 @@ impl Particles {
     /// Whether the values make sense (`Message::validate`).
     fn check(&self) -> Result<(), Invalid> {
         within("n_particles", self.n_particles, MAX_PARTICLES)?;
+        if self.n_filter < self.n_particles {
+            return Err(Invalid::OutOfRange("n_filter"));
+        }
         for p in self.particles() {
             all_finite("particles", &[p.x, p.y, p.theta, p.w])?;
         }

@@ -1,5 +1,5 @@
 //! Per-step cost of the estimators: EKF predict + update (target ≤ 1 µs), PF with 10,000
-//! particles predict + weight + resample (≤ 2 ms), histogram filter on a 200 × 200 × 16 belief
+//! particles predict + weight + resample (target ≤ 0.5 ms), histogram filter on a 200 × 200 × 16 belief
 //! predict + correct (≤ 5 ms).
 
 use criterion::{Criterion, criterion_group, criterion_main};

@@ -9,7 +9,7 @@ use mole_types::{BeaconSite, MAX_BEACONS, wrap_angle};
 use nalgebra::{Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
 
 /// Below this |a| the sinc terms use their Taylor series (error < 1e-20, no cancellation).
-const SINC_SERIES_BELOW: f64 = 1e-3;
+pub(crate) const SINC_SERIES_BELOW: f64 = 1e-3;
 
 /// Wraps an angle to (−π, π] with at most two ±2π steps (no fmod, no libm call), falling back
 /// to [`wrap_angle`] when |a| ≥ 5π; for the per-particle and per-cell hot loops.

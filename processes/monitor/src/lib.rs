@@ -7,6 +7,7 @@
 //! resolution. Per-message methods never allocate: every buffer is sized in [`Monitor::new`].
 
 mod ending;
+mod particles;
 mod progress;
 mod render;
 mod slam;
@@ -32,6 +33,8 @@ use mole_types::{
     TRUTH_GOAL_REACHED, TRUTH_IN_CONTACT, TopicStats, Trajectory, Truth, WorldMap, read_name,
     wrap_angle,
 };
+use particles::ParticleCounts;
+pub use particles::ParticleSummary;
 use slam::LandmarkMap;
 use smoothed::SmoothedTrajectory;
 use std::cell::Cell;
@@ -190,6 +193,8 @@ pub struct Monitor {
     update_ns: Histogram<u64>,
 
     particles: Vec<[f32; 2]>,
+    /// The particle filter's set size over the run.
+    particle_counts: ParticleCounts,
     landmarks: LandmarkMap,
     smoothed: SmoothedTrajectory,
 
@@ -267,6 +272,7 @@ impl Monitor {
             estimator: None,
             update_ns: hist()?,
             particles: Vec::with_capacity(MAX_PARTICLES),
+            particle_counts: ParticleCounts::default(),
             landmarks: LandmarkMap::new(),
             smoothed: SmoothedTrajectory::new(),
             stats: Vec::with_capacity(MAX_PROCESSES),
@@ -539,6 +545,7 @@ impl Monitor {
 
     /// Keeps the latest particle cloud (positions only) for the picture.
     pub fn on_particles(&mut self, p: &Particles) {
+        self.particle_counts.record(p.header.tick, p.n_filter);
         self.particles.clear();
         self.particles
             .extend(p.particles().iter().map(|q| [q.x, q.y]));
@@ -779,6 +786,7 @@ impl Monitor {
             nees_samples: self.nees_samples,
             ignored_messages: self.ignored_messages,
             slam: self.slam(),
+            particles: self.particle_counts.summary(),
             // The launcher's part: it fills these after the run.
             hangs: BTreeMap::new(),
             swaps: Vec::new(),

@@ -126,6 +126,9 @@ pub struct Summary {
     /// A SLAM estimator's landmark map against the true beacons (`null` for the others).
     #[serde(default)]
     pub slam: Option<crate::SlamSummary>,
+    /// The particle filter's set size over the run (`null` for the other estimators).
+    #[serde(default)]
+    pub particles: Option<crate::ParticleSummary>,
     /// The launcher's part: processes found hung (alive, silent for 5 s), per role.
     #[serde(default)]
     pub hangs: BTreeMap<String, u32>,

@@ -525,6 +525,7 @@ fn busy_monitor() -> Monitor {
     ));
     let mut particles: Box<Particles> = bytemuck::zeroed_box();
     particles.n_particles = 100;
+    particles.n_filter = particles.n_particles;
     for (i, q) in particles.particles.iter_mut().take(100).enumerate() {
         q.x = 1.0 + 0.005 * i as f32;
         q.y = 1.5;
@@ -610,6 +611,13 @@ fn summary_json_has_every_field_with_its_type_and_round_trips() {
     assert!(scan["rate_hz"].is_f64() && scan["dropped"].is_u64() && scan["invalid"].is_u64());
     assert_eq!(o["restarts"]["mapping"].as_u64(), Some(1));
     assert!(o["bounces"].is_u64() && o["give_ups"].is_u64());
+    // The particle set's size over the run, from the filter's count (not the message's).
+    let p = &o["particles"];
+    assert_eq!(
+        (p["min"].as_u64(), p["max"].as_u64(), p["last"].as_u64()),
+        (Some(100), Some(100), Some(100))
+    );
+    assert_eq!(p["series"], serde_json::json!([[0, 100]]));
     // The design's fields come first, in the design's order.
     let order = [
         "ticks",
@@ -808,6 +816,7 @@ fn per_message_methods_do_not_allocate_in_steady_state() {
     let c = grid(GRID_CONTACT, 16, 8, 0.25, |col, _| u8::from(col == 6));
     let mut particles: Box<Particles> = bytemuck::zeroed_box();
     particles.n_particles = mole_types::MAX_PARTICLES as u32;
+    particles.n_filter = particles.n_particles;
     let mut plan: Box<PlanStatus> = bytemuck::zeroed_box();
     plan.n_path = mole_types::MAX_PATH as u32;
     let mut landmarks: Box<Landmarks> = bytemuck::zeroed_box();

@@ -714,6 +714,7 @@ mod tests {
 
         let mut particles: Particles = zeroed();
         particles.n_particles = 5;
+        particles.n_filter = particles.n_particles;
         particles.particles[0] = Particle {
             x: 1.0,
             y: 1.0,
@@ -792,6 +793,7 @@ mod tests {
         status.n_path = 2;
         let mut particles: Particles = zeroed();
         particles.n_particles = 2;
+        particles.n_filter = particles.n_particles;
         let mut landmarks: Landmarks = zeroed();
         landmarks.n_landmarks = 1;
         let mut scan: Scan = zeroed();

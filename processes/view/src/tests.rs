@@ -62,6 +62,7 @@ fn scene() -> Scene {
     scene.on_scan(&scan);
     let mut particles: Box<Particles> = zeroed();
     particles.n_particles = 5000;
+    particles.n_filter = particles.n_particles;
     for (i, p) in particles.particles[..5000].iter_mut().enumerate() {
         p.x = i as f32;
     }
