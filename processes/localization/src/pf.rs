@@ -18,7 +18,6 @@
 use crate::models::{BeaconTable, MIN_RANGE, SINC_SERIES_BELOW, sliding_is_plausible};
 use crate::noise::NoiseModel;
 use crate::{Estimator, ReadingError, Readings};
-use mole_types::settings::SettingError;
 use mole_types::{
     BeaconReading, BeaconSite, EstimatorKind, Fix, MAX_PARTICLES, Odom, Particle, Particles, Pose2,
     Setting, WorldMap, wrap_angle,
@@ -225,7 +224,6 @@ pub fn low_variance_resample(weights: &[f64], r: f64, out: &mut [usize]) {
 /// Tuning of a [`ParticleFilter`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
 #[serde(default, deny_unknown_fields)]
-#[setting(check = PfConfig::check_setting)]
 pub struct PfConfig {
     /// J, the number of particles (1..=[`MAX_FILTER_PARTICLES`]); with `kld`, the most.
     #[setting(min = 1, max = MAX_FILTER_PARTICLES, fixed = "the particle set is allocated at start")]
@@ -256,7 +254,7 @@ pub struct PfConfig {
     /// KLD-sampling: bin size in θ (degrees).
     #[setting(above = 0.0, max = 360.0)]
     pub kld_bin_theta_deg: f64,
-    /// KLD-sampling: the fewest particles a resampling keeps (at most `n_particles`).
+    /// KLD-sampling: the fewest particles a resampling keeps (`n_particles` when it is more).
     #[setting(min = 1, max = MAX_FILTER_PARTICLES)]
     pub min_particles: usize,
 }
@@ -275,20 +273,6 @@ impl Default for PfConfig {
             kld_bin_theta_deg: DEFAULT_KLD_BIN_THETA_DEG,
             min_particles: DEFAULT_MIN_PARTICLES,
         }
-    }
-}
-
-impl PfConfig {
-    /// The check across keys: with KLD-sampling, `min_particles` ≤ `n_particles`.
-    fn check_setting(&self) -> Result<(), SettingError> {
-        if self.kld && self.min_particles > self.n_particles {
-            return Err(SettingError::new(
-                "min_particles",
-                "at most n_particles",
-                &self.min_particles,
-            ));
-        }
-        Ok(())
     }
 }
 
@@ -1464,27 +1448,19 @@ mod tests {
         assert_ne!(a.1, run(12).1);
     }
 
+    /// A minimum above the most is the most: `n_particles` = 1,000 with the default minimum of
+    /// 2,000 runs, and a tight belief keeps all 1,000.
     #[test]
-    fn min_particles_above_the_count_is_refused() {
+    fn min_particles_above_the_count_keeps_the_count() {
         use mole_types::settings::Setting as _;
-        let ok = PfConfig {
-            min_particles: 10_000,
+        let cfg = PfConfig {
+            n_particles: 1000,
             kld: true,
             ..PfConfig::default()
         };
-        assert!(ok.check_at("pf").is_ok());
-        // Without KLD-sampling the minimum is not used: a small set is not refused for it.
-        let small = PfConfig {
-            n_particles: 7,
-            ..PfConfig::default()
-        };
-        assert!(small.check_at("pf").is_ok());
-        let bad = PfConfig {
-            min_particles: 10_001,
-            kld: true,
-            ..PfConfig::default()
-        };
-        let e = bad.check_at("pf").unwrap_err();
-        assert!(e.to_string().contains("min_particles"), "{e}");
+        assert!(cfg.check_at("pf").is_ok());
+        let mut pf = kld_pf(1000, DEFAULT_MIN_PARTICLES, 1e-3, 1e-3, 3);
+        pf.resample();
+        assert_eq!(pf.len(), 1000);
     }
 }
