@@ -5,7 +5,8 @@
 #   - the arena: 10, 20, 30, 40 m a side (the default scenario scaled, obstacles, beacons and
 #     start with it; cells of 0.05 m until the grid reaches its cap of 512² cells at 25.6 m,
 #     then side/512, so the grid stops growing);
-#   - the particle filter's particles: 1k, 3k, 10k, 30k, 100k.
+#   - the particle filter's particles: 1k, 3k, 10k, 30k, 100k, without and with KLD-sampling
+#     (with it, the count is the most; the plot draws both).
 # Writes runs/cost-growth/cost.json and docs/img/cost-{observers,grid,particles}.png.
 #
 #   scripts/cost-growth.sh           # 15 s a point in realtime, 2,000 lockstep steps (≈ 10 min)
@@ -107,6 +108,8 @@ done
 for n in 1000 3000 10000 30000 100000; do
     measure particles "$n" "$(launch_with_observers 0)" "$default_scenario" --estimator pf \
         --set "localization.pf.n_particles=$n"
+    measure particles-kld "$n" "$(launch_with_observers 0)" "$default_scenario" --estimator pf \
+        --set "localization.pf.n_particles=$n" --set localization.pf.kld=true
 done
 echo "load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
 

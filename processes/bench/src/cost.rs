@@ -97,24 +97,29 @@ pub fn point_from_reports(
 }
 
 /// Writes `sweep` as a PNG of [`PLOT_SIZE`] to `path`.
-pub fn write_plot(sweep: &Sweep, path: &Path) -> Result<(), String> {
-    crate::canvas::write_png(path, PLOT_SIZE, &render(sweep)?)
+pub fn write_plot(sweeps: &[&Sweep], path: &Path) -> Result<(), String> {
+    crate::canvas::write_png(path, PLOT_SIZE, &render(sweeps)?)
 }
 
-/// `sweep` drawn into an RGB buffer of [`PLOT_SIZE`].
-pub fn render(sweep: &Sweep) -> Result<Vec<u8>, String> {
+/// `sweeps` drawn into an RGB buffer of [`PLOT_SIZE`], on the axes of the first: the first in
+/// full colour, any other beside it in pale colour and named in the legend (the particle filter
+/// with KLD-sampling beside it without).
+pub fn render(sweeps: &[&Sweep]) -> Result<Vec<u8>, String> {
     crate::canvas::register_font();
-    if sweep.points.is_empty() {
-        return Err(format!("sweep {} has no point", sweep.name));
+    let Some(sweep) = sweeps.first() else {
+        return Err("no sweep to draw".into());
+    };
+    if let Some(empty) = sweeps.iter().find(|s| s.points.is_empty()) {
+        return Err(format!("sweep {} has no point", empty.name));
     }
-    let xs = sweep.points.iter().map(|p| p.x);
+    let xs = sweeps.iter().flat_map(|s| s.points.iter().map(|p| p.x));
     let (lo, hi) = xs.fold((f64::MAX, f64::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
     let (width, height) = PLOT_SIZE;
     let mut pixels = vec![0u8; (width * height * 3) as usize];
     if sweep.log_x {
         let range = (lo.max(1.0) / 1.5)..(hi.max(1.0) * 1.5);
         draw(
-            sweep,
+            sweeps,
             &mut pixels,
             range.clone().log_scale(),
             range.log_scale(),
@@ -122,32 +127,27 @@ pub fn render(sweep: &Sweep) -> Result<Vec<u8>, String> {
     } else {
         let pad = ((hi - lo) * 0.05).max(0.5);
         let range = (lo - pad)..(hi + pad);
-        draw(sweep, &mut pixels, range.clone(), range)?;
+        draw(sweeps, &mut pixels, range.clone(), range)?;
     }
     Ok(pixels)
 }
 
-/// Draws the three lines on an x axis of either kind.
-fn draw<X>(sweep: &Sweep, pixels: &mut [u8], x: X, secondary_x: X) -> Result<(), String>
+/// Draws the three lines of each sweep on an x axis of either kind.
+fn draw<X>(sweeps: &[&Sweep], pixels: &mut [u8], x: X, secondary_x: X) -> Result<(), String>
 where
     X: AsRangedCoord<Value = f64>,
     X::CoordDescType: ValueFormatter<f64>,
 {
+    let sweep = sweeps[0];
     let failed = |e: &dyn std::fmt::Display| format!("plot {}: {e}", sweep.name);
     let root = BitMapBackend::with_buffer(pixels, PLOT_SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| failed(&e))?;
-    let latency_max = sweep
-        .points
-        .iter()
+    let all = || sweeps.iter().flat_map(|s| s.points.iter());
+    let latency_max = all()
         .map(|p| p.loop_p99_us.max(p.loop_p50_us))
         .fold(0.0, f64::max)
         * 1.4; // headroom for the legend
-    let cpu_max = sweep
-        .points
-        .iter()
-        .map(|p| p.cpu_percent)
-        .fold(0.0, f64::max)
-        * 1.4;
+    let cpu_max = all().map(|p| p.cpu_percent).fold(0.0, f64::max) * 1.4;
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!("mole: loop latency and stack CPU vs {}", sweep.name),
@@ -178,49 +178,69 @@ where
         .axis_desc_style(("sans-serif", 15))
         .draw()
         .map_err(|e| failed(&e))?;
-    let p50 = RGBColor(30, 90, 200);
-    let p99 = RGBColor(210, 50, 40);
-    let cpu = RGBColor(20, 150, 60);
-    let line = |f: fn(&CostPoint) -> f64| sweep.points.iter().map(move |p| (p.x, f(p)));
-    let dots = |f: fn(&CostPoint) -> f64, color: RGBColor| {
-        line(f).map(move |xy| Circle::new(xy, 4, color.filled()))
-    };
-    let legend = |color: RGBColor| {
-        move |(x, y): (i32, i32)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
-    };
-    chart
-        .draw_series(LineSeries::new(
-            line(|p| p.loop_p50_us),
-            p50.stroke_width(2),
-        ))
-        .map_err(|e| failed(&e))?
-        .label("loop latency p50")
-        .legend(legend(p50));
-    chart
-        .draw_series(dots(|p| p.loop_p50_us, p50))
-        .map_err(|e| failed(&e))?;
-    chart
-        .draw_series(LineSeries::new(
-            line(|p| p.loop_p99_us),
-            p99.stroke_width(2),
-        ))
-        .map_err(|e| failed(&e))?
-        .label("loop latency p99")
-        .legend(legend(p99));
-    chart
-        .draw_series(dots(|p| p.loop_p99_us, p99))
-        .map_err(|e| failed(&e))?;
-    chart
-        .draw_secondary_series(LineSeries::new(
-            line(|p| p.cpu_percent),
-            cpu.stroke_width(2),
-        ))
-        .map_err(|e| failed(&e))?
-        .label("stack CPU (right axis)")
-        .legend(legend(cpu));
-    chart
-        .draw_secondary_series(dots(|p| p.cpu_percent, cpu))
-        .map_err(|e| failed(&e))?;
+    for (i, sweep) in sweeps.iter().enumerate() {
+        // The first sweep in full colour, the others paler and named.
+        let shade = |c: RGBColor| {
+            if i == 0 {
+                c
+            } else {
+                let pale = |v: u8| (v as u16 + (255 - v as u16) / 2) as u8;
+                RGBColor(pale(c.0), pale(c.1), pale(c.2))
+            }
+        };
+        let named = |label: &str| {
+            if sweeps.len() == 1 {
+                label.to_owned()
+            } else {
+                format!("{label}, {}", sweep.name)
+            }
+        };
+        let p50 = shade(RGBColor(30, 90, 200));
+        let p99 = shade(RGBColor(210, 50, 40));
+        let cpu = shade(RGBColor(20, 150, 60));
+        let line = |f: fn(&CostPoint) -> f64| sweep.points.iter().map(move |p| (p.x, f(p)));
+        let dots = |f: fn(&CostPoint) -> f64, color: RGBColor| {
+            line(f).map(move |xy| Circle::new(xy, 4, color.filled()))
+        };
+        let legend = |color: RGBColor| {
+            move |(x, y): (i32, i32)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+            }
+        };
+        chart
+            .draw_series(LineSeries::new(
+                line(|p| p.loop_p50_us),
+                p50.stroke_width(2),
+            ))
+            .map_err(|e| failed(&e))?
+            .label(named("loop latency p50"))
+            .legend(legend(p50));
+        chart
+            .draw_series(dots(|p| p.loop_p50_us, p50))
+            .map_err(|e| failed(&e))?;
+        chart
+            .draw_series(LineSeries::new(
+                line(|p| p.loop_p99_us),
+                p99.stroke_width(2),
+            ))
+            .map_err(|e| failed(&e))?
+            .label(named("loop latency p99"))
+            .legend(legend(p99));
+        chart
+            .draw_series(dots(|p| p.loop_p99_us, p99))
+            .map_err(|e| failed(&e))?;
+        chart
+            .draw_secondary_series(LineSeries::new(
+                line(|p| p.cpu_percent),
+                cpu.stroke_width(2),
+            ))
+            .map_err(|e| failed(&e))?
+            .label(named("stack CPU (right axis)"))
+            .legend(legend(cpu));
+        chart
+            .draw_secondary_series(dots(|p| p.cpu_percent, cpu))
+            .map_err(|e| failed(&e))?;
+    }
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)
@@ -316,7 +336,14 @@ mod tests {
                     .collect(),
             };
             let path = dir.0.join(format!("plot-{log_x}.png"));
-            write_plot(&sweep, &path).unwrap();
+            // Beside it, the same sweep 20 % cheaper, drawn pale.
+            let mut cheaper = sweep.clone();
+            cheaper.name = "cheaper".into();
+            for p in &mut cheaper.points {
+                p.cpu_percent *= 0.8;
+                p.loop_p50_us *= 0.8;
+            }
+            write_plot(&[&sweep, &cheaper], &path).unwrap();
             let decoder =
                 png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
             let mut reader = decoder.read_info().unwrap();
@@ -329,6 +356,8 @@ mod tests {
                 has([30, 90, 200]) && has([210, 50, 40]) && has([20, 150, 60]),
                 "log {log_x}"
             );
+            // The sweep beside it, in pale colours.
+            assert!(has([142, 172, 227]) && has([137, 202, 157]), "log {log_x}");
             // Text is drawn: dark anti-aliased grey pixels besides pure black lines.
             assert!(
                 pixels
@@ -349,6 +378,6 @@ mod tests {
             log_x: false,
             points: Vec::new(),
         };
-        assert!(render(&sweep).unwrap_err().contains("no point"));
+        assert!(render(&[&sweep]).unwrap_err().contains("no point"));
     }
 }

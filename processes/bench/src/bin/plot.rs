@@ -1,9 +1,10 @@
 //! `mole-plot`: gathers the points `scripts/cost-growth.sh` measured into one cost.json and draws
 //! one plot per sweep (cost-<sweep>.png): loop latency p50/p99 and stack CPU against the
-//! variable.
+//! variable; the particle filter with KLD-sampling (`particles-kld`) is drawn beside the one
+//! without, in cost-particles.png.
 //!
 //! The points file has one line per point, tab-separated: the sweep (`observers`, `grid`,
-//! `particles`), the variable's value, the realtime report of `mole bench stack --json`, the
+//! `particles`, `particles-kld`), the variable's value, the realtime report of `mole bench stack --json`, the
 //! lockstep one or `-`, and the 1-minute load average when the point ended or `-`. With
 //! `--redraw cost.json` it draws the plots of a cost.json again, measuring nothing.
 
@@ -13,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// The sweeps, in order: name, x axis label, logarithmic x axis.
-const SWEEPS: [(&str, &str, bool); 3] = [
+const SWEEPS: [(&str, &str, bool); 4] = [
     (
         "observers",
         "observers reading every topic (mole-observer)",
@@ -29,7 +30,15 @@ const SWEEPS: [(&str, &str, bool); 3] = [
         "particle filter's particles (log scale; the message carries at most 16,384)",
         true,
     ),
+    (
+        "particles-kld",
+        "particle filter's most particles, KLD-sampling (log scale)",
+        true,
+    ),
 ];
+
+/// A sweep drawn in another's plot instead of its own: (sweep, the plot's sweep).
+const DRAWN_BESIDE: [(&str, &str); 1] = [("particles-kld", "particles")];
 
 #[derive(Debug, Parser)]
 #[command(
@@ -74,8 +83,17 @@ fn run(args: &Args) -> Result<(), String> {
         std::fs::write(json, text + "\n").map_err(|e| format!("{}: {e}", json.display()))?;
     }
     for sweep in &report.sweeps {
+        if DRAWN_BESIDE.iter().any(|&(s, _)| s == sweep.name) {
+            continue;
+        }
+        let beside = report.sweeps.iter().filter(|other| {
+            DRAWN_BESIDE
+                .iter()
+                .any(|&(s, plot)| s == other.name && plot == sweep.name)
+        });
+        let sweeps: Vec<&Sweep> = std::iter::once(sweep).chain(beside).collect();
         let path = args.img_dir.join(format!("cost-{}.png", sweep.name));
-        write_plot(sweep, &path)?;
+        write_plot(&sweeps, &path)?;
         println!("{}", path.display());
     }
     Ok(())
