@@ -525,7 +525,8 @@ fn busy_monitor() -> Monitor {
     ));
     let mut particles: Box<Particles> = bytemuck::zeroed_box();
     particles.n_particles = 100;
-    particles.n_filter = particles.n_particles;
+    // A filter larger than the message: the message carries a strided subset.
+    particles.n_filter = 25_000;
     for (i, q) in particles.particles.iter_mut().take(100).enumerate() {
         q.x = 1.0 + 0.005 * i as f32;
         q.y = 1.5;
@@ -615,9 +616,9 @@ fn summary_json_has_every_field_with_its_type_and_round_trips() {
     let p = &o["particles"];
     assert_eq!(
         (p["min"].as_u64(), p["max"].as_u64(), p["last"].as_u64()),
-        (Some(100), Some(100), Some(100))
+        (Some(25_000), Some(25_000), Some(25_000))
     );
-    assert_eq!(p["series"], serde_json::json!([[0, 100]]));
+    assert_eq!(p["series"], serde_json::json!([[0, 25_000]]));
     // The design's fields come first, in the design's order.
     let order = [
         "ticks",
