@@ -263,8 +263,27 @@ fn served_recording_plays_as_exported(recording: &Path, export: &Path) {
         ])
         .output()
         .expect("run the client");
+    // SIGKILL to the launcher: its server must not outlive it (it serves with a ready file
+    // named after the launcher's pid).
+    let ready = format!("mole-foxglove-{}.url", server.id());
     let _ = server.kill();
     let _ = server.wait();
+    let orphans = || {
+        std::fs::read_dir("/proc")
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter(|e| {
+                std::fs::read(e.path().join("cmdline"))
+                    .is_ok_and(|c| String::from_utf8_lossy(&c).contains(&ready))
+            })
+            .count()
+    };
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while orphans() > 0 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(orphans(), 0, "mole-foxglove outlived its killed launcher");
     let seen: Value = serde_json::from_slice(&output.stdout).expect("the client's JSON");
     // This client package predates the playback state message; it only says so.
     let errors: Vec<&Value> = seen["errors"]

@@ -10,6 +10,7 @@
 
 use crate::Failure;
 use crate::sidecar::{self, Attached, Sidecar};
+use crate::supervisor::dies_with_the_launcher;
 use crate::{RestartPolicy, RestartWhen};
 use clap::Args;
 use mole_types::env;
@@ -331,11 +332,14 @@ pub fn view(server: Server, args: &ViewArgs) -> Result<(), Failure> {
     let program = sidecar::program(server.program)?;
     let stack = Attached::to(&args.namespace)?;
     let ready = ready_file(server);
-    let child = Command::new(program)
+    let mut command = Command::new(program);
+    command
         .args(args.serve.server_args(server, &ready))
         .env(env::NAMESPACE, &args.namespace)
         .env(env::MODE, stack.mode.name())
-        .stdin(Stdio::null())
+        .stdin(Stdio::null());
+    dies_with_the_launcher(&mut command);
+    let child = command
         .spawn()
         .map_err(|e| Failure::run(format!("cannot start {}: {e}", server.program)))?;
     let mut announced = false;
@@ -367,11 +371,14 @@ fn view_recording(server: Server, file: &Path, serve: &ServeArgs) -> Result<(), 
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .map_err(|e| Failure::run(format!("cannot install the Ctrl-C handler: {e}")))?;
     let ready = ready_file(server);
-    let mut child = Command::new(program)
+    let mut command = Command::new(program);
+    command
         .args(serve.server_args(server, &ready))
         .arg("--file")
         .arg(file)
-        .stdin(Stdio::null())
+        .stdin(Stdio::null());
+    dies_with_the_launcher(&mut command);
+    let mut child = command
         .spawn()
         .map_err(|e| Failure::run(format!("cannot start {}: {e}", server.program)))?;
     let (mut announced, mut stopping) = (false, false);

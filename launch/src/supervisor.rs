@@ -594,20 +594,23 @@ fn start(spec: &ChildSpec, attempt: u32, env: &[(String, String)]) -> Result<Chi
     if let Some(cwd) = &spec.cwd {
         command.current_dir(cwd);
     }
-    // SAFETY: between fork and exec only async-signal-safe work happens: one prctl(2) call.
-    // If the launcher dies, even by SIGKILL, its children get SIGTERM instead of running on
-    // as orphans that keep the namespace busy.
-    unsafe {
-        std::os::unix::process::CommandExt::pre_exec(&mut command, || {
-            nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
-                .map_err(std::io::Error::from)
-        });
-    }
+    dies_with_the_launcher(&mut command);
     command.spawn().map_err(|source| LaunchError::Spawn {
         role: spec.role.clone(),
         program: spec.program.clone(),
         source,
     })
+}
+
+/// If the launcher dies, even by SIGKILL, the child `command` starts gets SIGTERM instead of
+/// running on as an orphan that keeps its namespace or port busy.
+pub fn dies_with_the_launcher(command: &mut Command) {
+    // SAFETY: between fork and exec only async-signal-safe work happens: one prctl(2) call.
+    unsafe {
+        command.pre_exec(|| {
+            nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
+        });
+    }
 }
 
 /// Finds a process's program: a command with a `/` is a path (relative to the current
