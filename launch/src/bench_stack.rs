@@ -552,6 +552,7 @@ pub fn bench_split(args: &BenchStackArgs) -> Result<SplitReport, Failure> {
         .arg("--quiet")
         .args(stack_options(&args.up))
         .stdout(std::process::Stdio::null());
+    crate::supervisor::dies_with_the_launcher(&mut onboard);
     let mut onboard = OnboardHalf(
         onboard
             .spawn()

@@ -168,6 +168,7 @@ pub fn record(args: &RecordArgs) -> Result<(), Failure> {
         .env(env::NAMESPACE, &args.namespace)
         .env(env::MODE, stack.mode.name())
         .stdin(Stdio::null());
+    crate::supervisor::dies_with_the_launcher(&mut command);
     let child = command
         .spawn()
         .map_err(|e| Failure::run(format!("cannot start {RECORDER_PROGRAM}: {e}")))?;
