@@ -519,11 +519,6 @@ impl ParticleFilter {
         self.n == 0
     }
 
-    /// Whether KLD-sampling sizes the set.
-    pub fn kld(&self) -> bool {
-        self.kld.is_some()
-    }
-
     /// Normalised weights w^[j] of the J particles.
     pub fn weights(&self) -> &[f64] {
         &scalars(&self.w)[..self.n]
@@ -1012,19 +1007,20 @@ mod tests {
             .collect()
     }
 
+    /// A filter among [`beacon_sites`] with the tests' noise.
+    fn filter(initial: Pose2, config: PfConfig, seed: u64) -> ParticleFilter {
+        let noise = NoiseModel::new(0.05, 0.05, 0.05, 0.02, 0.5);
+        ParticleFilter::new(initial, config, noise, &beacon_sites(), seed)
+    }
+
     fn pf(n: usize) -> ParticleFilter {
-        ParticleFilter::new(
-            Pose2::new(5.0, 5.0, 0.0),
-            PfConfig {
-                n_particles: n,
-                initial_std_xy: 0.3,
-                initial_std_theta: 0.2,
-                ..PfConfig::default()
-            },
-            NoiseModel::new(0.05, 0.05, 0.05, 0.02, 0.5),
-            &beacon_sites(),
-            7,
-        )
+        let config = PfConfig {
+            n_particles: n,
+            initial_std_xy: 0.3,
+            initial_std_theta: 0.2,
+            ..PfConfig::default()
+        };
+        filter(Pose2::new(5.0, 5.0, 0.0), config, 7)
     }
 
     #[test]
@@ -1160,18 +1156,13 @@ mod tests {
     /// A set of `n` particles spread around (5, 5) with headings all round, so the kernels see
     /// every octant of atan2 and the wrap of θ.
     fn spread_pf(n: usize) -> ParticleFilter {
-        ParticleFilter::new(
-            Pose2::new(5.0, 5.0, 3.0),
-            PfConfig {
-                n_particles: n,
-                initial_std_xy: 4.0,
-                initial_std_theta: 3.0,
-                ..PfConfig::default()
-            },
-            NoiseModel::new(0.05, 0.05, 0.05, 0.02, 0.5),
-            &beacon_sites(),
-            5,
-        )
+        let config = PfConfig {
+            n_particles: n,
+            initial_std_xy: 4.0,
+            initial_std_theta: 3.0,
+            ..PfConfig::default()
+        };
+        filter(Pose2::new(5.0, 5.0, 3.0), config, 5)
     }
 
     /// The lane kernels against the scalar formulas with std's libm (hypot, atan2, sin_cos,
@@ -1344,21 +1335,16 @@ mod tests {
     }
 
     fn kld_pf(n: usize, min: usize, std_xy: f64, std_theta: f64, seed: u64) -> ParticleFilter {
-        ParticleFilter::new(
-            // Mid-bin: bins of 0.2 m and 10° start at 0.
-            Pose2::new(5.1, 5.1, 5f64.to_radians()),
-            PfConfig {
-                n_particles: n,
-                min_particles: min,
-                kld: true,
-                initial_std_xy: std_xy,
-                initial_std_theta: std_theta,
-                ..PfConfig::default()
-            },
-            NoiseModel::new(0.05, 0.05, 0.05, 0.02, 0.5),
-            &beacon_sites(),
-            seed,
-        )
+        let config = PfConfig {
+            n_particles: n,
+            min_particles: min,
+            kld: true,
+            initial_std_xy: std_xy,
+            initial_std_theta: std_theta,
+            ..PfConfig::default()
+        };
+        // Mid-bin: bins of 0.2 m and 10° start at 0.
+        filter(Pose2::new(5.1, 5.1, 5f64.to_radians()), config, seed)
     }
 
     /// All particles in one bin: k = 1, the bound is 0, the set shrinks to `min_particles`; a
