@@ -1,4 +1,4 @@
-//! One GraphSLAM solve (target ≤ 200 ms): 10,001 poses from ten 100 s laps at 10 Hz among 30
+//! One GraphSLAM solve (target ≤ 100 ms): 10,001 poses from ten 100 s laps at 10 Hz among 30
 //! beacons seen within 6 m (~7 readings a pose, ~70,000 in all), Levenberg–Marquardt from the
 //! dead-reckoned odometry chain to convergence, symbolic analysis included. Also the landmark
 //! marginal covariances of that graph, which `optimize` does not compute.

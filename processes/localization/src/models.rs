@@ -146,7 +146,12 @@ pub fn range_bearing_jacobian_h(x: &Vector3<f64>, beacon: (f64, f64)) -> Matrix2
     if q < MIN_RANGE * MIN_RANGE {
         return Matrix2x3::zeros();
     }
-    let r = q.sqrt();
+    range_bearing_jacobian_at(dx, dy, q, q.sqrt())
+}
+
+/// [`range_bearing_jacobian_h`] from the beacon's offset (dx, dy) from the pose, q = dx² + dy²
+/// and r = √q, for callers that have them already.
+pub fn range_bearing_jacobian_at(dx: f64, dy: f64, q: f64, r: f64) -> Matrix2x3<f64> {
     Matrix2x3::new(
         -dx / r,
         -dy / r,

@@ -7,7 +7,7 @@
 //! eq. 3). The residuals are "estimate minus measurement" with angles wrapped to (−π, π].
 
 use crate::models::{MIN_RANGE, unicycle_jacobian_v};
-use crate::models::{range_bearing_h, range_bearing_jacobian_h, unicycle_g, unicycle_jacobian_g};
+use crate::models::{range_bearing_jacobian_at, unicycle_g, unicycle_jacobian_g};
 use crate::noise::NoiseModel;
 use mole_types::wrap_angle;
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
@@ -120,20 +120,41 @@ impl ObservationFactor {
     /// the landmark estimate sits on the pose (range < [`MIN_RANGE`]), where the bearing and
     /// the Jacobian are undefined and the factor is left out of that linearisation.
     pub fn residual(&self, pose: &Vector3<f64>, landmark: &Vector2<f64>) -> Option<Vector2<f64>> {
-        let h = range_bearing_h(pose, (landmark[0], landmark[1]));
-        (h[0] >= MIN_RANGE)
-            .then(|| Vector2::new(h[0] - self.range, wrap_angle(h[1] - self.bearing)))
+        let (dx, dy, q) = Self::offset(pose, landmark)?;
+        Some(self.error(pose, dx, dy, q.sqrt()))
     }
 
-    /// (∂e/∂x, ∂e/∂m): H_t of Thrun §7.4 for the pose, and its negated x, y columns for the
-    /// landmark (Thrun §11.2, Table 11.2 line 17).
-    pub fn jacobians(
+    /// The residual and ∂e/∂x (H_t of Thrun §7.4) at once; ∂e/∂m is minus the first two
+    /// columns of ∂e/∂x (Thrun §11.2, Table 11.2 line 17). None where [`Self::residual`] is.
+    pub fn linearise(
+        &self,
         pose: &Vector3<f64>,
         landmark: &Vector2<f64>,
-    ) -> (Matrix2x3<f64>, Matrix2<f64>) {
-        let j_pose = range_bearing_jacobian_h(pose, (landmark[0], landmark[1]));
-        let j_landmark = -j_pose.fixed_columns::<2>(0).into_owned();
-        (j_pose, j_landmark)
+    ) -> Option<(Vector2<f64>, Matrix2x3<f64>)> {
+        let (dx, dy, q) = Self::offset(pose, landmark)?;
+        let r = q.sqrt();
+        Some((
+            self.error(pose, dx, dy, r),
+            range_bearing_jacobian_at(dx, dy, q, r),
+        ))
+    }
+
+    /// The landmark's offset (dx, dy) from the pose and q = dx² + dy², None within
+    /// [`MIN_RANGE`].
+    fn offset(pose: &Vector3<f64>, landmark: &Vector2<f64>) -> Option<(f64, f64, f64)> {
+        let (dx, dy) = (landmark[0] - pose[0], landmark[1] - pose[1]);
+        let q = dx * dx + dy * dy;
+        (q >= MIN_RANGE * MIN_RANGE).then_some((dx, dy, q))
+    }
+
+    /// h(x, m) − z (algorithms §6.6) from the offset and its length r = √q, not `hypot`: the
+    /// ranges are metres, far from where √ over- or underflows, and hypot took a quarter of
+    /// the linearisation's time.
+    fn error(&self, pose: &Vector3<f64>, dx: f64, dy: f64, r: f64) -> Vector2<f64> {
+        Vector2::new(
+            r - self.range,
+            wrap_angle(dy.atan2(dx) - pose[2] - self.bearing),
+        )
     }
 }
 
