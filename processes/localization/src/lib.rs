@@ -23,6 +23,7 @@ pub mod noise;
 pub mod pf;
 pub mod settings;
 pub mod slam;
+pub mod ziggurat;
 
 pub use bayes::{BayesConfig, HistogramFilter};
 pub use ekf::Ekf;

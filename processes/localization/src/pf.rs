@@ -17,6 +17,7 @@
 
 use crate::models::{BeaconTable, MIN_RANGE, SINC_SERIES_BELOW, sliding_is_plausible};
 use crate::noise::NoiseModel;
+use crate::ziggurat::ZigguratLanes;
 use crate::{Estimator, ReadingError, Readings};
 use mole_types::{
     BeaconReading, BeaconSite, EstimatorKind, Fix, MAX_PARTICLES, Odom, Particle, Particles, Pose2,
@@ -82,22 +83,27 @@ fn wrap_lanes(a: f64x4) -> f64x4 {
 /// Below this |a| (rad) [`small_sin_cos`] is used; the Taylor terms it drops are below 1e-18.
 const SMALL_ANGLE: f64 = 0.1;
 
-/// sin a and cos a by their Taylor series to a¹¹ and a¹², for |a| < [`SMALL_ANGLE`] (the turn of
-/// one step): a motion step then needs no range reduction.
+/// sin(a)/a and cos a by their Taylor series to a¹⁰ and a¹², for |a| < [`SMALL_ANGLE`] (the turn
+/// of one step): a motion step then needs no range reduction and no division.
 #[inline]
-fn small_sin_cos(a: f64x4) -> (f64x4, f64x4) {
+fn small_sinc_cos(a: f64x4) -> (f64x4, f64x4) {
     let a2 = a * a;
     let term = |k: f64| a2 * f64x4::splat(1.0 / k);
     let one = f64x4::ONE;
-    let sin = a
-        * (one
-            - term(6.0)
-                * (one
-                    - term(20.0) * (one - term(42.0) * (one - term(72.0) * (one - term(110.0))))));
+    let sinc = one
+        - term(6.0)
+            * (one - term(20.0) * (one - term(42.0) * (one - term(72.0) * (one - term(110.0)))));
     let cos = one
         - term(2.0)
             * (one - term(12.0) * (one - term(30.0) * (one - term(56.0) * (one - term(90.0)))));
-    (sin, cos)
+    (sinc, cos)
+}
+
+/// sin a and cos a from [`small_sinc_cos`], for |a| < [`SMALL_ANGLE`].
+#[inline]
+fn small_sin_cos(a: f64x4) -> (f64x4, f64x4) {
+    let (sinc, cos) = small_sinc_cos(a);
+    (a * sinc, cos)
 }
 
 /// sin(a)/a given sin(a), with the limit 1 at a = 0 (the lane form of `models::sinc`).
@@ -406,6 +412,8 @@ pub struct ParticleFilter {
     draws: [Vec<f64x4>; 5],
     picks: Vec<usize>,
     rng: Xoshiro256PlusPlus,
+    /// The motion step's normal draws, four lanes at a time.
+    normals: ZigguratLanes,
     kld: Option<KldBins>,
     /// Motion and measurement noise.
     pub noise: NoiseModel,
@@ -440,6 +448,8 @@ impl ParticleFilter {
         );
         let column = || vec![f64x4::ZERO; groups(n)];
         let threshold = fin(config.resample_threshold, DEFAULT_RESAMPLE_THRESHOLD).clamp(0.0, 1.0);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ PF_SEED_SALT);
+        let normals = ZigguratLanes::from_rng(&mut rng);
         let mut pf = Self {
             n,
             x: column(),
@@ -456,7 +466,8 @@ impl ParticleFilter {
             cos_next: column(),
             draws: [column(), column(), column(), column(), column()],
             picks: vec![0; n],
-            rng: Xoshiro256PlusPlus::seed_from_u64(seed ^ PF_SEED_SALT),
+            rng,
+            normals,
             kld: config.kld.then(|| KldBins::new(&config, n)),
             noise,
             resample_threshold: threshold,
@@ -599,9 +610,7 @@ impl ParticleFilter {
         // multiplied by 0).
         for (column, &sigma) in self.draws.iter_mut().zip(&sigmas) {
             if sigma > 0.0 {
-                for d in &mut scalars_mut(column)[..self.n] {
-                    *d = self.rng.sample(StandardNormal);
-                }
+                self.normals.fill(&mut column[..groups(self.n)]);
             }
         }
         let [sv, sw, fx, fy, ft] = sigmas.map(f64x4::splat);
@@ -615,19 +624,32 @@ impl ParticleFilter {
             // The chord form of g (models::unicycle_g): length v·dt·sinc(ω·dt/2) along
             // φ = θ + ω·dt/2, whose sin and cos are θ's turned by ω·dt/2.
             let half = f64x4::HALF * wj * dt;
-            let (sin_h, cos_h) = if half.abs().simd_lt(f64x4::splat(SMALL_ANGLE)).all() {
-                small_sin_cos(half)
+            let (sinc_h, sin_h, cos_h) = if half.abs().simd_lt(f64x4::splat(SMALL_ANGLE)).all() {
+                let (sinc_h, cos_h) = small_sinc_cos(half);
+                (sinc_h, half * sinc_h, cos_h)
             } else {
-                half.sin_cos()
+                let (sin_h, cos_h) = half.sin_cos();
+                (sinc_lanes(half, sin_h), sin_h, cos_h)
             };
-            let s = vj * dt * sinc_lanes(half, sin_h);
+            let s = vj * dt * sinc_h;
             let (sin_t, cos_t) = (self.sin_t[k], self.cos_t[k]);
             let sin_phi = sin_t * cos_h + cos_t * sin_h;
             let cos_phi = cos_t * cos_h - sin_t * sin_h;
             let mut x = self.x[k] + s * cos_phi + fx * nx[k];
             let mut y = self.y[k] + s * sin_phi + fy * ny[k];
+            // θ' = φ + ω·dt/2 + noise: sin θ' and cos θ' are φ's turned by that small angle,
+            // rescaled to unit length by one Newton step, so no lane needs a range reduction.
+            let rest = half + ft * nt[k];
             let theta = wrap_lanes(self.theta[k] + wj * dt + ft * nt[k]);
-            let (sin_t, cos_t) = theta.sin_cos();
+            let (sin_t, cos_t) = if rest.abs().simd_lt(f64x4::splat(SMALL_ANGLE)).all() {
+                let (sin_r, cos_r) = small_sin_cos(rest);
+                let sin_t = sin_phi * cos_r + cos_phi * sin_r;
+                let cos_t = cos_phi * cos_r - sin_phi * sin_r;
+                let unit = f64x4::HALF * (f64x4::splat(3.0) - sin_t.mul_add(sin_t, cos_t * cos_t));
+                (sin_t * unit, cos_t * unit)
+            } else {
+                theta.sin_cos()
+            };
             if slides {
                 x += cos_t * bx - sin_t * by;
                 y += sin_t * bx + cos_t * by;
@@ -1153,6 +1175,30 @@ mod tests {
         assert_eq!(a.pose(), b.pose());
     }
 
+    /// sin θ and cos θ are carried from step to step by small rotations: over a long run they
+    /// must stay those of θ, and of unit length, to rounding.
+    #[test]
+    fn the_carried_sin_and_cos_stay_those_of_theta() {
+        let mut p = spread_pf(64);
+        for k in 0..20_000 {
+            let omega = if k % 2000 < 1000 { 0.9 } else { -0.4 };
+            p.predict_with(0.3, omega, 0.01).unwrap();
+        }
+        let n = p.len();
+        for j in 0..n {
+            let (st, ct) = scalars(&p.theta)[j].sin_cos();
+            let (s, c) = (scalars(&p.sin_t)[j], scalars(&p.cos_t)[j]);
+            assert!(
+                (s - st).abs() < 1e-13 && (c - ct).abs() < 1e-13,
+                "{j}: {s} {c} vs {st} {ct}"
+            );
+            assert!(
+                (s.mul_add(s, c * c) - 1.0).abs() < 1e-15,
+                "{j}: |(sin, cos)| drifted"
+            );
+        }
+    }
+
     /// A set of `n` particles spread around (5, 5) with headings all round, so the kernels see
     /// every octant of atan2 and the wrap of θ.
     fn spread_pf(n: usize) -> ParticleFilter {
@@ -1209,6 +1255,8 @@ mod tests {
             let (s, c) = small_sin_cos(f64x4::splat(a));
             assert!((s.to_array()[0] - a.sin()).abs() < 2e-17, "{a}");
             assert!((c.to_array()[0] - a.cos()).abs() < 2e-16, "{a}");
+            let sinc = small_sinc_cos(f64x4::splat(a)).0.to_array()[0];
+            assert!((sinc - crate::models::sinc(a)).abs() < 2e-16, "{a}");
         }
 
         // Weights: ln p of a range-bearing reading, the bearing wrapped, summed in log space.
