@@ -180,10 +180,7 @@ mod tests {
             ("planning.dwa.heading=0.4", "one of the keys"),
             ("planning.dwa.critics.heading=\"high\"", "invalid type"),
             ("localization.pf.n_particles=0", "≥ 1"),
-            (
-                "localization.pf.n_particles=2000000",
-                "≤ MAX_FILTER_PARTICLES",
-            ),
+            ("localization.pf.n_particles=2000000", "≤ 1000000"),
             (
                 "mapping.log_odds.threshold=9.0",
                 "threshold < min(max, -min)",

@@ -53,11 +53,11 @@ impl fmt::Display for SettingError {
 impl std::error::Error for SettingError {}
 
 /// What a key's doc comment, bounds and `fixed` say.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct About {
     pub doc: &'static str,
-    /// `≥ 0, ≤ 1`; empty without bounds.
-    pub rule: &'static str,
+    /// `≥ 0, ≤ 1`; empty without bounds. A bound that is a constant is given by its value.
+    pub rule: std::borrow::Cow<'static, str>,
     /// Why it cannot change while the process runs; `None`: it can.
     pub fixed: Option<&'static str>,
 }
@@ -81,7 +81,7 @@ impl Key {
             path: path.to_owned(),
             kind: T::kind(),
             doc: about.doc.to_owned(),
-            rule: about.rule.to_owned(),
+            rule: about.rule.into_owned(),
             fixed: about.fixed.map(str::to_owned),
         }
     }

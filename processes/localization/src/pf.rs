@@ -231,7 +231,7 @@ pub fn low_variance_resample(weights: &[f64], r: f64, out: &mut [usize]) {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Setting)]
 #[serde(default, deny_unknown_fields)]
 pub struct PfConfig {
-    /// J, the number of particles (1..=[`MAX_FILTER_PARTICLES`]); with `kld`, the most.
+    /// J, the number of particles; with `kld`, the most.
     #[setting(min = 1, max = MAX_FILTER_PARTICLES, fixed = "the particle set is allocated at start")]
     pub n_particles: usize,
     /// Resample when N_eff < `resample_threshold` · J.

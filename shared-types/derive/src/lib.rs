@@ -308,34 +308,31 @@ mod setting {
                     let r = rules(&f.attrs)?;
                     let mut rule_text = Vec::new();
                     let mut bounds = Vec::new();
-                    if let Some(min) = &r.min {
-                        rule_text.push(format!("≥ {}", quote!(#min)));
-                        let expected = format!("a value ≥ {}", quote!(#min));
+                    for (bound, symbol, test) in [
+                        (&r.min, "≥", quote!(is_at_least)),
+                        (&r.above, ">", quote!(is_above)),
+                        (&r.max, "≤", quote!(is_at_most)),
+                    ] {
+                        let Some(bound) = bound else { continue };
+                        // A literal bound is written as it is; a constant (`MAX_FILTER_PARTICLES`)
+                        // by its value, which only the compiled code knows.
+                        let value = match bound {
+                            Expr::Lit(_) => {
+                                let text = quote!(#bound).to_string();
+                                quote!(#text)
+                            }
+                            _ => quote!(#bound),
+                        };
+                        let rule = format!("{symbol} {{}}");
+                        let expected = format!("a value {symbol} {{}}");
+                        rule_text.push(quote!(format!(#rule, #value)));
                         bounds.push(quote! {
-                            if !#s::Bound::is_at_least(&self.#ident, #min) {
-                                return Err(#s::SettingError::new(&path, #expected, &self.#ident));
+                            if !#s::Bound::#test(&self.#ident, #bound) {
+                                let expected = format!(#expected, #value);
+                                return Err(#s::SettingError::new(&path, &expected, &self.#ident));
                             }
                         });
                     }
-                    if let Some(above) = &r.above {
-                        rule_text.push(format!("> {}", quote!(#above)));
-                        let expected = format!("a value > {}", quote!(#above));
-                        bounds.push(quote! {
-                            if !#s::Bound::is_above(&self.#ident, #above) {
-                                return Err(#s::SettingError::new(&path, #expected, &self.#ident));
-                            }
-                        });
-                    }
-                    if let Some(max) = &r.max {
-                        rule_text.push(format!("≤ {}", quote!(#max)));
-                        let expected = format!("a value ≤ {}", quote!(#max));
-                        bounds.push(quote! {
-                            if !#s::Bound::is_at_most(&self.#ident, #max) {
-                                return Err(#s::SettingError::new(&path, #expected, &self.#ident));
-                            }
-                        });
-                    }
-                    let rule_text = rule_text.join(", ");
                     let fixed = match &r.fixed {
                         Some(why) => quote! { Some(#why) },
                         None => quote! { None },
@@ -350,7 +347,13 @@ mod setting {
                     keys.push(quote! {
                         <#ty as #s::Setting>::keys_at(
                             &#s::join(at, #key),
-                            #s::About { doc: #text, rule: #rule_text, fixed: #fixed },
+                            #s::About {
+                                doc: #text,
+                                rule: ::std::borrow::Cow::Owned(
+                                    <[::std::string::String]>::join(&[#(#rule_text),*], ", "),
+                                ),
+                                fixed: #fixed,
+                            },
                             out,
                         );
                     });
