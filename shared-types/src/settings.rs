@@ -57,7 +57,7 @@ impl std::error::Error for SettingError {}
 pub struct About {
     pub doc: &'static str,
     /// `≥ 0, ≤ 1`; empty without bounds. A bound that is a constant is given by its value.
-    pub rule: std::borrow::Cow<'static, str>,
+    pub rule: String,
     /// Why it cannot change while the process runs; `None`: it can.
     pub fixed: Option<&'static str>,
 }
@@ -81,7 +81,7 @@ impl Key {
             path: path.to_owned(),
             kind: T::kind(),
             doc: about.doc.to_owned(),
-            rule: about.rule.into_owned(),
+            rule: about.rule,
             fixed: about.fixed.map(str::to_owned),
         }
     }

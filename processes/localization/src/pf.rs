@@ -639,8 +639,9 @@ impl ParticleFilter {
             let mut y = self.y[k] + s * sin_phi + fy * ny[k];
             // θ' = φ + ω·dt/2 + noise: sin θ' and cos θ' are φ's turned by that small angle,
             // rescaled to unit length by one Newton step, so no lane needs a range reduction.
-            let rest = half + ft * nt[k];
-            let theta = wrap_lanes(self.theta[k] + wj * dt + ft * nt[k]);
+            let heading_noise = ft * nt[k];
+            let rest = half + heading_noise;
+            let theta = wrap_lanes(self.theta[k] + wj * dt + heading_noise);
             let (sin_t, cos_t) = if rest.abs().simd_lt(f64x4::splat(SMALL_ANGLE)).all() {
                 let (sin_r, cos_r) = small_sin_cos(rest);
                 let sin_t = sin_phi * cos_r + cos_phi * sin_r;

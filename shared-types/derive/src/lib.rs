@@ -349,9 +349,7 @@ mod setting {
                             &#s::join(at, #key),
                             #s::About {
                                 doc: #text,
-                                rule: ::std::borrow::Cow::Owned(
-                                    <[::std::string::String]>::join(&[#(#rule_text),*], ", "),
-                                ),
+                                rule: <[::std::string::String]>::join(&[#(#rule_text),*], ", "),
                                 fixed: #fixed,
                             },
                             out,
